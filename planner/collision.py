@@ -1,0 +1,250 @@
+"""Fast collision checking of the robot against itself and the environment (pinocchio + coal).
+
+Geometry: each link mesh is replaced by a small convex hull grown by a swept-sphere radius so it
+always contains the original mesh (primitives are kept). Pairs: adjacent links, links on one
+joint and pairs colliding at the rest configuration are disabled (as MoveIt's setup assistant
+does); pairs never within `prune_margin` over `prune_samples` uniform samples are pruned. The pair
+set is computed once per robot spec and cached. Obstacles are grown by `env_padding`.
+A check runs pinocchio's dynamic-AABB-tree broad phase over the pairs of the requested subset.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .environment import Environment
+from .geometry import coal_convex, se3, simplified_hull
+from .paths import cache_dir
+from .robot import Robot
+
+CODE_VERSION = "pairs-1"
+
+
+@dataclass(frozen=True)
+class CollisionParams:
+    """How the simplified model is made; part of the pair cache key."""
+
+    hull_tolerance: float = 0.004  # m: largest distance from a mesh vertex to its simplified hull
+    prune_margin: float = 0.05  # m: a pair never closer than this in the samples is pruned
+    prune_samples: int = 4000
+    env_padding: float = 0.01  # m: obstacles are grown by this
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class PairSet:
+    """Which robot self-collision pairs are checked, and why the others are not."""
+
+    kept: tuple[tuple[str, str], ...]
+    adjacent: int
+    at_rest: int
+    pruned: int
+
+    def to_json(self) -> str:
+        return json.dumps({"kept": self.kept, "adjacent": self.adjacent, "at_rest": self.at_rest, "pruned": self.pruned})
+
+    @staticmethod
+    def from_json(text: str) -> "PairSet":
+        d = json.loads(text)
+        return PairSet(tuple(tuple(p) for p in d["kept"]), d["adjacent"], d["at_rest"], d["pruned"])
+
+
+def simplified_robot_geometry(robot: Robot, tolerance: float) -> pin.GeometryModel:
+    """The robot's collision model with every mesh replaced by its conservative simplified hull."""
+    gm = robot.collision_model.copy()
+    for obj in gm.geometryObjects:
+        if isinstance(obj.geometry, coal.BVHModelBase):
+            vertices = np.asarray(obj.geometry.vertices()) * np.asarray(obj.meshScale)
+            hull, radius = simplified_hull(vertices, tolerance)
+            shape = coal_convex(hull)
+            shape.setSweptSphereRadius(radius)
+            obj.geometry = shape
+            obj.meshPath = ""
+    return gm
+
+
+def geometry_part(robot: Robot, gm: pin.GeometryModel, index: int) -> str:
+    """The part a geometry belongs to: an arm name, '<arm>_hand', or 'torso' (fixed base included)."""
+    obj = gm.geometryObjects[index]
+    for arm in robot.spec.arms:
+        if obj.name.startswith(arm.hand.prefix):
+            return f"{arm.name}_hand"
+    q = robot.model.joints[obj.parentJoint].idx_q if obj.parentJoint > 0 else -1
+    for name, idx in robot.arm_idx.items():
+        if q in idx:
+            return name
+    return "torso"
+
+
+def _candidate_pairs(robot: Robot, gm: pin.GeometryModel) -> tuple[list[tuple[int, int]], int]:
+    """All pairs of robot geometries on different, non-adjacent joints (and not both on the base)."""
+    parents = robot.model.parents
+    out, adjacent = [], 0
+    n = len(gm.geometryObjects)
+    for i in range(n):
+        for j in range(i + 1, n):
+            a, b = gm.geometryObjects[i].parentJoint, gm.geometryObjects[j].parentJoint
+            if a == b or parents[a] == b or parents[b] == a:
+                adjacent += 1
+            else:
+                out.append((i, j))
+    return out, adjacent
+
+
+def _pair_cache_key(robot: Robot, params: CollisionParams) -> str:
+    h = hashlib.sha256(CODE_VERSION.encode())
+    h.update(robot.spec.text().encode())
+    for path in [robot.spec.body_urdf] + [a.hand.urdf for a in robot.spec.arms]:
+        h.update(path.read_bytes())
+    h.update(repr((params.hull_tolerance, params.prune_margin, params.prune_samples, params.seed)).encode())
+    return h.hexdigest()[:20]
+
+
+def compute_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParams) -> PairSet:
+    """Sample the robot to find the self-collision pairs worth checking (see module docstring)."""
+    pairs, adjacent = _candidate_pairs(robot, gm)
+    work = gm.copy()
+    work.removeAllCollisionPairs()
+    for i, j in pairs:
+        work.addCollisionPair(pin.CollisionPair(i, j))
+    data, gd = robot.model.createData(), pin.GeometryData(work)
+    pin.computeCollisions(robot.model, data, work, gd, robot.q_rest, False)
+    at_rest = np.array([r.isCollision() for r in gd.collisionResults])
+    for k in range(len(pairs)):
+        gd.collisionRequests[k].security_margin = params.prune_margin
+        if at_rest[k]:
+            gd.deactivateCollisionPair(k)
+    near = np.zeros(len(pairs), dtype=bool)
+    undecided = np.flatnonzero(~at_rest)
+    rng = np.random.default_rng(params.seed)
+    results = gd.collisionResults
+    for _ in range(params.prune_samples):
+        q = rng.uniform(robot.lower, robot.upper)
+        pin.computeCollisions(robot.model, data, work, gd, q, False)
+        hit = [k for k in undecided if results[int(k)].isCollision()]
+        if hit:
+            near[hit] = True
+            for k in hit:
+                gd.deactivateCollisionPair(int(k))
+            undecided = np.setdiff1d(undecided, hit)
+    names = [o.name for o in gm.geometryObjects]
+    kept = tuple((names[i], names[j]) for (i, j), k in zip(pairs, near) if k)
+    return PairSet(kept, adjacent, int(at_rest.sum()), int((~near & ~at_rest).sum()))
+
+
+def robot_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParams, use_cache: bool = True) -> PairSet:
+    """The pair set, from the user cache when the spec, URDFs and parameters are unchanged."""
+    path = cache_dir() / "collision_pairs" / f"{_pair_cache_key(robot, params)}.json"
+    if use_cache and path.is_file():
+        return PairSet.from_json(path.read_text())
+    pairs = compute_pair_set(robot, gm, params)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(pairs.to_json())
+    tmp.replace(path)
+    return pairs
+
+
+@dataclass(frozen=True, eq=False)
+class CollisionModel:
+    """Robot hulls + obstacles in one pinocchio GeometryModel, with the pairs of each subset.
+
+    Subsets: 'all', 'self', 'env', '<arm>' (the arm and its hand against everything),
+    '<arm>_env', '<arm>_hand' (the hand against everything), 'hands' (one hand against the other).
+    Shared read-only; each thread or process makes its own `checker()`.
+    """
+
+    robot: Robot
+    geometry: pin.GeometryModel
+    pair_set: PairSet
+    params: CollisionParams
+    n_robot_geoms: int
+    parts: tuple[str, ...]
+    subsets: dict[str, np.ndarray]
+
+    def pair_names(self, subset: str = "all") -> list[tuple[str, str]]:
+        objs = self.geometry.geometryObjects
+        return [(objs[self.geometry.collisionPairs[int(k)].first].name, objs[self.geometry.collisionPairs[int(k)].second].name)
+                for k in self.subsets[subset]]
+
+    def checker(self) -> "CollisionChecker":
+        return CollisionChecker(self)
+
+
+def build_collision_model(robot: Robot, environment: Environment = (), params: CollisionParams = CollisionParams(),
+                          use_cache: bool = True) -> CollisionModel:
+    """Simplify the robot, choose its pairs (cached), add the obstacles and index the subsets."""
+    gm = simplified_robot_geometry(robot, params.hull_tolerance)
+    pair_set = robot_pair_set(robot, gm, params, use_cache)
+    n_robot = len(gm.geometryObjects)
+    parts = tuple(geometry_part(robot, gm, i) for i in range(n_robot))
+    for ob in environment:
+        gm.addGeometryObject(pin.GeometryObject(f"env/{ob.name}", 0, 0, se3(ob.pose), ob.coal_shape(params.env_padding)))
+    index = {o.name: i for i, o in enumerate(gm.geometryObjects)}
+    gm.removeAllCollisionPairs()
+    for a, b in pair_set.kept:
+        gm.addCollisionPair(pin.CollisionPair(index[a], index[b]))
+    n_self = len(gm.collisionPairs)
+    for i in range(n_robot):
+        if gm.geometryObjects[i].parentJoint == 0:
+            continue  # the fixed base against fixed obstacles is checked once, by `check` of the task
+        for e in range(n_robot, len(gm.geometryObjects)):
+            gm.addCollisionPair(pin.CollisionPair(i, e))
+    first = np.array([cp.first for cp in gm.collisionPairs], dtype=int)
+    second = np.array([cp.second for cp in gm.collisionPairs], dtype=int)
+    part = np.array(parts + ("env",) * (len(gm.geometryObjects) - n_robot))
+    pa, pb = part[first], part[second]
+    k = np.arange(len(first))
+    subsets = {"all": k, "self": k[:n_self], "env": k[n_self:]}
+    for arm in robot.spec.arm_names:
+        mine = (pa == arm) | (pb == arm) | (pa == f"{arm}_hand") | (pb == f"{arm}_hand")
+        subsets[arm] = k[mine]
+        subsets[f"{arm}_env"] = k[mine & (k >= n_self)]
+        subsets[f"{arm}_hand"] = k[(pa == f"{arm}_hand") | (pb == f"{arm}_hand")]
+    hands = [f"{a}_hand" for a in robot.spec.arm_names]
+    subsets["hands"] = k[((pa == hands[0]) & (pb == hands[1])) | ((pa == hands[1]) & (pb == hands[0]))]
+    return CollisionModel(robot, gm, pair_set, params, n_robot, parts, subsets)
+
+
+class CollisionChecker:
+    """Per-thread scratch data for one CollisionModel: one broad-phase manager per subset."""
+
+    def __init__(self, cm: CollisionModel):
+        self.cm = cm
+        self.model = cm.robot.model
+        self.data = self.model.createData()
+        self._gdata: dict[str, pin.GeometryData] = {}
+        self._managers: dict[str, object] = {}
+        self.checks = 0
+
+    def _subset(self, subset: str) -> tuple[pin.GeometryData, object]:
+        if subset not in self._managers:
+            if subset not in self.cm.subsets:
+                raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
+            gd = pin.GeometryData(self.cm.geometry)
+            active = np.zeros(len(self.cm.geometry.collisionPairs), dtype=bool)
+            active[self.cm.subsets[subset]] = True
+            for k in np.flatnonzero(~active):
+                gd.deactivateCollisionPair(int(k))
+            self._gdata[subset] = gd
+            self._managers[subset] = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(self.model, self.cm.geometry, gd)
+        return self._gdata[subset], self._managers[subset]
+
+    def in_collision(self, q: np.ndarray, subset: str = "all") -> bool:
+        """True if any pair of the subset collides at q."""
+        self.checks += 1
+        _, manager = self._subset(subset)
+        return bool(pin.computeCollisions(self.model, self.data, manager, q, True))
+
+    def colliding_pairs(self, q: np.ndarray, subset: str = "all") -> list[tuple[str, str]]:
+        """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
+        gd, _ = self._subset(subset)
+        pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
+        objs, pairs = self.cm.geometry.geometryObjects, self.cm.geometry.collisionPairs
+        return [(objs[pairs[int(k)].first].name, objs[pairs[int(k)].second].name)
+                for k in self.cm.subsets[subset] if gd.collisionResults[int(k)].isCollision()]

@@ -1,0 +1,45 @@
+"""Where regrasp finds its assets, the robot descriptions of example-robot-data, and its cache."""
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import os
+from pathlib import Path
+
+from .errors import RegraspError
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+ASSETS = PROJECT_ROOT / "assets"
+DEFAULT_TASK = ASSETS / "tasks" / "default.toml"
+
+
+@functools.cache
+def robot_data_share() -> Path:
+    """The `share` folder of the installed example-robot-data package (holds `example-robot-data/robots`)."""
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError as exc:
+        raise RegraspError("the package example-robot-data is not installed (pip install example-robot-data)") from exc
+    for f in dist.files or ():
+        parts = Path(str(f)).parts
+        if "example-robot-data" in parts and "robots" in parts:
+            full = Path(str(dist.locate_file(f)))
+            i = parts.index("example-robot-data")
+            return full.parents[len(parts) - i - 1]
+    raise RegraspError("example-robot-data is installed but ships no robots/ folder")
+
+
+def robot_data_file(relative: str) -> Path:
+    """A file inside example-robot-data's `robots/` folder, e.g. 'alex_description/urdf/alex_nub_hands.urdf'."""
+    return robot_data_share() / "example-robot-data" / "robots" / relative
+
+
+def cache_dir() -> Path:
+    """The user cache folder ($REGRASP_CACHE, else $XDG_CACHE_HOME/regrasp, else ~/.cache/regrasp)."""
+    env = os.environ.get("REGRASP_CACHE")
+    if env:
+        base = Path(env)
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "regrasp"
+    base.mkdir(parents=True, exist_ok=True)
+    return base
