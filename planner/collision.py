@@ -1,14 +1,15 @@
 """Fast collision checking of the robot against itself and the environment (pinocchio + coal).
 
-Geometry: each link mesh is replaced by a small convex hull grown by a swept-sphere radius so it
-always contains the original mesh (primitives are kept). Pairs: adjacent links, links on one
+Geometry: each link mesh is replaced by its convex hull, which contains it (primitives are kept). Pairs: adjacent links, links on one
 joint and pairs colliding at the rest configuration are disabled (as MoveIt's setup assistant
 does); pairs never within `prune_margin` over `prune_samples` uniform samples are pruned. The pair
-set is computed once per robot spec and cached. Obstacles are grown by `env_padding`.
+set is computed once per robot spec and cached. Robot-obstacle pairs collide within
+`env_padding` (a security margin, which the broad phase inflates its boxes by).
 A check runs pinocchio's dynamic-AABB-tree broad phase over the pairs of the requested subset.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from dataclasses import dataclass
@@ -16,9 +17,10 @@ from dataclasses import dataclass
 import coal
 import numpy as np
 import pinocchio as pin
+import trimesh
 
 from .environment import Environment
-from .geometry import coal_convex, se3, simplified_hull
+from .geometry import coal_convex, se3
 from .paths import cache_dir
 from .robot import Robot
 
@@ -29,10 +31,9 @@ CODE_VERSION = "pairs-1"
 class CollisionParams:
     """How the simplified model is made; part of the pair cache key."""
 
-    hull_tolerance: float = 0.004  # m: largest distance from a mesh vertex to its simplified hull
     prune_margin: float = 0.05  # m: a pair never closer than this in the samples is pruned
     prune_samples: int = 4000
-    env_padding: float = 0.01  # m: obstacles are grown by this
+    env_padding: float = 0.01  # m: robot-obstacle pairs count as colliding closer than this
     seed: int = 0
 
 
@@ -54,16 +55,18 @@ class PairSet:
         return PairSet(tuple(tuple(p) for p in d["kept"]), d["adjacent"], d["at_rest"], d["pruned"])
 
 
-def simplified_robot_geometry(robot: Robot, tolerance: float) -> pin.GeometryModel:
-    """The robot's collision model with every mesh replaced by its conservative simplified hull."""
+def simplified_robot_geometry(robot: Robot) -> pin.GeometryModel:
+    """The robot's collision model with every mesh replaced by its convex hull (a copy)."""
+    return _simplified(robot).copy()
+
+
+@functools.lru_cache(maxsize=8)
+def _simplified(robot: Robot) -> pin.GeometryModel:
     gm = robot.collision_model.copy()
     for obj in gm.geometryObjects:
         if isinstance(obj.geometry, coal.BVHModelBase):
             vertices = np.asarray(obj.geometry.vertices()) * np.asarray(obj.meshScale)
-            hull, radius = simplified_hull(vertices, tolerance)
-            shape = coal_convex(hull)
-            shape.setSweptSphereRadius(radius)
-            obj.geometry = shape
+            obj.geometry = coal_convex(trimesh.convex.convex_hull(vertices))
             obj.meshPath = ""
     return gm
 
@@ -101,7 +104,7 @@ def _pair_cache_key(robot: Robot, params: CollisionParams) -> str:
     h.update(robot.spec.text().encode())
     for path in [robot.spec.body_urdf] + [a.hand.urdf for a in robot.spec.arms]:
         h.update(path.read_bytes())
-    h.update(repr((params.hull_tolerance, params.prune_margin, params.prune_samples, params.seed)).encode())
+    h.update(repr((params.prune_margin, params.prune_samples, params.seed)).encode())
     return h.hexdigest()[:20]
 
 
@@ -179,12 +182,12 @@ class CollisionModel:
 def build_collision_model(robot: Robot, environment: Environment = (), params: CollisionParams = CollisionParams(),
                           use_cache: bool = True) -> CollisionModel:
     """Simplify the robot, choose its pairs (cached), add the obstacles and index the subsets."""
-    gm = simplified_robot_geometry(robot, params.hull_tolerance)
+    gm = simplified_robot_geometry(robot)
     pair_set = robot_pair_set(robot, gm, params, use_cache)
     n_robot = len(gm.geometryObjects)
     parts = tuple(geometry_part(robot, gm, i) for i in range(n_robot))
     for ob in environment:
-        gm.addGeometryObject(pin.GeometryObject(f"env/{ob.name}", 0, 0, se3(ob.pose), ob.coal_shape(params.env_padding)))
+        gm.addGeometryObject(pin.GeometryObject(f"env/{ob.name}", 0, 0, se3(ob.pose), ob.coal_shape()))
     index = {o.name: i for i, o in enumerate(gm.geometryObjects)}
     gm.removeAllCollisionPairs()
     for a, b in pair_set.kept:
@@ -231,6 +234,8 @@ class CollisionChecker:
             active[self.cm.subsets[subset]] = True
             for k in np.flatnonzero(~active):
                 gd.deactivateCollisionPair(int(k))
+            for k in self.cm.subsets["env"]:
+                gd.collisionRequests[int(k)].security_margin = self.cm.params.env_padding
             self._gdata[subset] = gd
             self._managers[subset] = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(self.model, self.cm.geometry, gd)
         return self._gdata[subset], self._managers[subset]

@@ -38,8 +38,8 @@ class Obstacle:
         m.apply_transform(self.pose)
         return m
 
-    def coal_shape(self, padding: float = 0.0) -> coal.CollisionGeometry:
-        """The obstacle's coal shape in its own frame, grown by `padding` (a swept-sphere radius)."""
+    def coal_shape(self) -> coal.CollisionGeometry:
+        """The obstacle's exact coal shape in its own frame."""
         if self.shape == "box":
             g = coal.Box(*self.size)
         elif self.shape == "cylinder":
@@ -50,10 +50,6 @@ class Obstacle:
             g = coal.Sphere(self.size[0])
         else:
             g = coal_mesh(self.mesh)
-        if padding > 0.0:
-            if not hasattr(g, "setSweptSphereRadius"):
-                raise ValueError(f"obstacle '{self.name}': padding unsupported for shape {self.shape}")
-            g.setSweptSphereRadius(padding)
         return g
 
 

@@ -1,0 +1,78 @@
+"""Reachability: can an arm (with the torso) bring its hand's grasp centre to a point, collision-free?
+
+The grasp centre is the mean of the fingertips at the hand's open configuration, in the palm
+frame: where an object sits when the hand closes on it. Position-only damped least squares from
+several seeds; a solution counts only if it respects joint limits and the arm and hand collide
+with nothing (the manipulated object itself is not in the collision model).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .collision import CollisionChecker
+from .robot import Robot
+
+
+@dataclass(frozen=True)
+class ReachResult:
+    arm: str
+    reachable: bool
+    distance: float  # m: best distance of the grasp centre to the target over all seeds
+    q: np.ndarray | None  # a collision-free configuration achieving it, when reachable
+
+
+def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
+    """The grasp centre of an arm's hand in its palm frame."""
+    hand = robot.spec.arm(arm).hand
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_rest)
+    palm = data.oMf[robot.frame_id(hand.prefixed(hand.palm_frame))]
+    tips = [data.oMf[robot.frame_id(hand.prefixed(f.tip_frame))].translation for f in hand.fingers]
+    return palm.actInv(np.mean(tips, axis=0))
+
+
+def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, iterations: int = 150,
+                   tol: float = 1e-3) -> np.ndarray:
+    """Damped least squares on torso + arm joints moving the grasp centre to `target` from q0."""
+    hand = robot.spec.arm(arm).hand
+    fid = robot.frame_id(hand.prefixed(hand.palm_frame))
+    offset = grasp_centre(robot, arm)
+    idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
+    data = robot.model.createData()
+    q = q0.copy()
+    for _ in range(iterations):
+        pin.forwardKinematics(robot.model, data, q)
+        pin.updateFramePlacement(robot.model, data, fid)
+        M = data.oMf[fid]
+        err = target - M.act(offset)
+        if np.linalg.norm(err) < tol:
+            break
+        J6 = pin.computeFrameJacobian(robot.model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+        J = J6[:3, idx] - np.cross(M.rotation @ offset, J6[3:, idx].T).T
+        dq = J.T @ np.linalg.solve(J @ J.T + 1e-3 * np.eye(3), err)
+        q[idx] = np.clip(q[idx] + np.clip(dq, -0.3, 0.3), robot.lower[idx], robot.upper[idx])
+    return q
+
+
+def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray, rng: np.random.Generator,
+          seeds: int = 12, tolerance: float = 0.02) -> ReachResult:
+    """Try `seeds` starts (rest first, then random torso+arm); reachable if one ends within tolerance, collision-free."""
+    idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
+    offset = grasp_centre(robot, arm)
+    hand = robot.spec.arm(arm).hand
+    data = robot.model.createData()
+    best = np.inf
+    for s in range(seeds):
+        q0 = robot.q_rest.copy()
+        if s:
+            q0[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
+        q = solve_position(robot, arm, target, q0)
+        centre = pin.SE3(robot.frame_placement(q, hand.prefixed(hand.palm_frame), data)).act(offset)
+        d = float(np.linalg.norm(centre - target))
+        best = min(best, d)
+        if d <= tolerance and not checker.in_collision(q, arm):
+            return ReachResult(arm, True, d, q)
+    return ReachResult(arm, False, best, None)
