@@ -149,7 +149,9 @@ def build_robot(spec: RobotSpec) -> Robot:
         _, vis = pin.appendModel(model, hmodel, vis, hvis, fid, mount)
         model = model_c
     base = pin.SE3(pin.rpy.rpyToMatrix(*spec.base_rpy), np.array(spec.base_xyz))
-    model.jointPlacements[1] = base * model.jointPlacements[1]
+    for j in range(1, model.njoints):
+        if model.parents[j] == 0:
+            model.jointPlacements[j] = base * model.jointPlacements[j]
     for i, f in enumerate(model.frames):
         if f.parentJoint == 0:
             f.placement = base * f.placement
