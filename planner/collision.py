@@ -3,7 +3,8 @@
 Geometry: each link mesh is replaced by its convex hull, which contains it (primitives are kept). Pairs: adjacent links, links on one
 joint and pairs colliding at the rest configuration are disabled (as MoveIt's setup assistant
 does); pairs never within `prune_margin` over `prune_samples` uniform samples are pruned. The pair
-set is computed once per robot spec and cached. Robot-obstacle pairs collide within
+set is computed once per robot spec and cached. Pairs between the two arms (hands included) are
+never pruned: the arms share a workspace, and uniform samples rarely bring the hands together. Robot-obstacle pairs collide within
 `env_padding` (a security margin, which the broad phase inflates its boxes by).
 A check runs pinocchio's dynamic-AABB-tree broad phase over the pairs of the requested subset.
 """
@@ -24,7 +25,7 @@ from .geometry import coal_convex, se3
 from .paths import cache_dir
 from .robot import Robot
 
-CODE_VERSION = "pairs-1"
+CODE_VERSION = "pairs-2"
 
 
 @dataclass(frozen=True)
@@ -122,8 +123,11 @@ def compute_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParam
         gd.collisionRequests[k].security_margin = params.prune_margin
         if at_rest[k]:
             gd.deactivateCollisionPair(k)
-    near = np.zeros(len(pairs), dtype=bool)
-    undecided = np.flatnonzero(~at_rest)
+    arm_of = [geometry_part(robot, gm, i).removesuffix("_hand") for i in range(len(gm.geometryObjects))]
+    near = np.array([arm_of[i] != arm_of[j] and "torso" not in (arm_of[i], arm_of[j]) for i, j in pairs]) & ~at_rest
+    for k in np.flatnonzero(near):
+        gd.deactivateCollisionPair(int(k))
+    undecided = np.flatnonzero(~at_rest & ~near)
     rng = np.random.default_rng(params.seed)
     results = gd.collisionResults
     for _ in range(params.prune_samples):

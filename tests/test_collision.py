@@ -1,0 +1,141 @@
+"""The simplified collision model against the full meshes, the pruned pairs, and the subsets."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from planner.collision import _candidate_pairs, compute_pair_set, CollisionParams, robot_pair_set, simplified_robot_geometry
+from planner.geometry import se3
+from planner.reach import reach
+
+
+def _full_mesh_model(scene, cm):
+    """The original URDF collision meshes + the obstacles, with every pair the simplified model may skip
+    only for a stated reason (adjacent links, touching at rest) removed."""
+    robot = scene.robot
+    gm = robot.collision_model.copy()
+    n_robot = len(gm.geometryObjects)
+    pairs, _ = _candidate_pairs(robot, gm)
+    names = [o.name for o in gm.geometryObjects]
+    data, gd = robot.model.createData(), None
+    gm.removeAllCollisionPairs()
+    for i, j in pairs:
+        gm.addCollisionPair(pin.CollisionPair(i, j))
+    gd = pin.GeometryData(gm)
+    pin.computeCollisions(robot.model, data, gm, gd, robot.q_rest, False)
+    at_rest = {(names[cp.first], names[cp.second]) for cp, r in zip(gm.collisionPairs, gd.collisionResults) if r.isCollision()}
+    gm.removeAllCollisionPairs()
+    for i, j in pairs:
+        if (names[i], names[j]) not in at_rest:
+            gm.addCollisionPair(pin.CollisionPair(i, j))
+    for ob in scene.environment:
+        gm.addGeometryObject(pin.GeometryObject(f"env/{ob.name}", 0, 0, se3(ob.pose), ob.coal_shape()))
+    for i in range(n_robot):
+        if gm.geometryObjects[i].parentJoint != 0:
+            for e in range(n_robot, len(gm.geometryObjects)):
+                gm.addCollisionPair(pin.CollisionPair(i, e))
+    return gm, at_rest
+
+
+@pytest.mark.slow
+def test_no_collision_missed_against_full_meshes(default_scene, default_collision):
+    """On 1,000 configurations around rest, every full-mesh collision is also found by the hull model."""
+    robot = default_scene.robot
+    gm, _ = _full_mesh_model(default_scene, default_collision)
+    data, gd = robot.model.createData(), pin.GeometryData(gm)
+    checker = default_collision.checker()
+    rng = np.random.default_rng(7)
+    mesh_hits = hull_hits = 0
+    for _ in range(1000):
+        q = robot.clip(robot.q_rest + rng.normal(0.0, 0.6, robot.nq))
+        mesh = pin.computeCollisions(robot.model, data, gm, gd, q, True)
+        hull = checker.in_collision(q)
+        assert hull or not mesh, "a full-mesh collision was missed by the simplified model"
+        mesh_hits += mesh
+        hull_hits += hull
+    assert 100 < mesh_hits < 900, "the sample should mix free and colliding configurations"
+    # Hulls are conservative but not absurdly so: most hull-only hits must also be mesh hits.
+    assert hull_hits - mesh_hits < 0.5 * (1000 - mesh_hits)
+
+
+def test_pruned_pairs_never_collide_on_fresh_samples(default_scene, default_collision):
+    """The pairs pruned by sampling collide in none of 3,000 fresh uniform samples (other seed)."""
+    robot = default_scene.robot
+    gm = simplified_robot_geometry(robot)
+    pairs, _ = _candidate_pairs(robot, gm)
+    names = [o.name for o in gm.geometryObjects]
+    kept = set(default_collision.pair_set.kept)
+    gm.removeAllCollisionPairs()
+    for i, j in pairs:
+        if (names[i], names[j]) not in kept:
+            gm.addCollisionPair(pin.CollisionPair(i, j))
+    data, gd = robot.model.createData(), pin.GeometryData(gm)
+    pin.computeCollisions(robot.model, data, gm, gd, robot.q_rest, False)
+    for k, r in enumerate(gd.collisionResults):
+        if r.isCollision():  # disabled because touching at rest, by design
+            gd.deactivateCollisionPair(k)
+    active = sum(gd.activeCollisionPairs)
+    assert active == default_collision.pair_set.pruned
+    rng = np.random.default_rng(12345)
+    for _ in range(3000):
+        assert not pin.computeCollisions(robot.model, data, gm, gd, rng.uniform(robot.lower, robot.upper), True)
+
+
+def test_pair_set_is_deterministic_and_cached(default_scene, tmp_path, monkeypatch):
+    robot = default_scene.robot
+    params = CollisionParams(prune_samples=300)
+    gm = simplified_robot_geometry(robot)
+    a = compute_pair_set(robot, gm, params)
+    b = compute_pair_set(robot, gm, params)
+    assert a == b
+    monkeypatch.setenv("REGRASP_CACHE", str(tmp_path))
+    c = robot_pair_set(robot, gm, params)
+    assert list(tmp_path.rglob("*.json")), "the pair set was not cached"
+    assert robot_pair_set(robot, gm, params) == c == a
+
+
+def test_subsets(default_scene, default_collision):
+    """Both hands brought to one point collide as 'hands' but not with the environment."""
+    robot = default_scene.robot
+    checker = default_collision.checker()
+    assert not checker.in_collision(default_scene.q_initial)
+    rng = np.random.default_rng(0)
+    target = np.array([0.40, 0.0, 1.05])
+    right = reach(robot, checker, "right", target, rng)
+    left = reach(robot, checker, "left", target + [0.0, 0.0, 0.02], rng)
+    assert right.reachable and left.reachable
+    q = right.q.copy()
+    q[robot.arm_idx["left"]] = left.q[robot.arm_idx["left"]]
+    q[robot.torso_idx] = right.q[robot.torso_idx]
+    assert checker.in_collision(q, "hands")
+    assert checker.in_collision(q)
+    assert not checker.in_collision(q, "right_env")
+    assert all(any(n.startswith("right_hand/") for n in p) and any(n.startswith("left_hand/") for n in p)
+               for p in checker.colliding_pairs(q, "hands"))
+
+
+def test_environment_padding(default_scene):
+    """A robot link closer to an obstacle than the padding collides; farther away it does not."""
+    from planner.collision import build_collision_model
+    from planner.environment import Obstacle
+    from planner.geometry import pose
+
+    robot = default_scene.robot
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_rest)
+    head = robot.frame_placement(robot.q_rest, "Head")[:3, 3] if robot.model.existFrame("Head") else None
+    assert head is not None
+    results = {}
+    for gap in (0.005, 0.03):
+        # a thin wall above the head: find its lowest free height by bisection on the unpadded model
+        lo, hi = head[2], head[2] + 0.5
+        for _ in range(30):
+            mid = (lo + hi) / 2
+            wall = Obstacle("wall", "box", (1.0, 1.0, 0.01), pose((head[0], head[1], mid)))
+            cm0 = build_collision_model(robot, (wall,), CollisionParams(env_padding=0.0))
+            lo, hi = (mid, hi) if cm0.checker().in_collision(robot.q_rest) else (lo, mid)
+        wall = Obstacle("wall", "box", (1.0, 1.0, 0.01), pose((head[0], head[1], hi + gap)))
+        cm = build_collision_model(robot, (wall,), CollisionParams(env_padding=0.01))
+        results[gap] = cm.checker().in_collision(robot.q_rest)
+    assert results == {0.005: True, 0.03: False}
