@@ -1,0 +1,144 @@
+"""The workbench in a real browser: headless Debian chromium (software WebGL) draws the robot and obeys the GUI."""
+from __future__ import annotations
+
+import io
+import socket
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+from playwright.sync_api import Page, sync_playwright
+
+from planner.paths import DEFAULT_TASK
+from workbench.app import Workbench
+
+pytestmark = pytest.mark.browser
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+    "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic",
+]
+VIEWPORT = {"width": 1024, "height": 720}
+SCENE_WIDTH = 640  # px: the left part of the page, where the 3-D view is not covered by the GUI panel
+CHANGED = 0.003  # fraction of the view's pixels that must change for a change to count
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _view(page: Page) -> np.ndarray:
+    """The 3-D view as an int array (rows, cols, rgb)."""
+    image = Image.open(io.BytesIO(page.screenshot())).convert("RGB")
+    return np.asarray(image, dtype=np.int16)[:, :SCENE_WIDTH]
+
+
+def _changed(a: np.ndarray, b: np.ndarray) -> float:
+    """Fraction of pixels whose colour differs noticeably."""
+    return float((np.abs(a - b).max(axis=2) > 24).mean())
+
+
+def _settled(page: Page, timeout: float = 20.0) -> np.ndarray:
+    """The view once two shots in a row agree (meshes arrived and drawn)."""
+    last, end = _view(page), time.monotonic() + timeout
+    while time.monotonic() < end:
+        time.sleep(0.4)
+        shot = _view(page)
+        if _changed(shot, last) < 1e-4:
+            return shot
+        last = shot
+    raise AssertionError("the 3-D view never settled")
+
+
+def _until_changed(page: Page, before: np.ndarray, timeout: float = 15.0) -> float:
+    """Wait for the view to change from `before`, then settle; returns the changed fraction."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and _changed(_view(page), before) < CHANGED:
+        time.sleep(0.3)
+    return _changed(_settled(page), before)
+
+
+def _wait_for(condition: Callable[[], bool], timeout: float = 10.0) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.1)
+    return condition()
+
+
+@pytest.fixture(scope="module")
+def workbench() -> Iterator[Workbench]:
+    wb = Workbench(DEFAULT_TASK, "127.0.0.1", _free_port())
+    yield wb
+    wb.close()
+
+
+@pytest.fixture(scope="module")
+def page(workbench: Workbench) -> Iterator[Page]:
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium is not installed at /usr/bin/chromium (apt-get install chromium)")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        page = browser.new_page(viewport=VIEWPORT)
+        page.goto(workbench.url)
+        assert workbench.collision_ready.wait(60), "the collision model was never built"
+        page.get_by_text("Collisions:").wait_for(timeout=30_000)
+        yield page
+        browser.close()
+
+
+def test_robot_is_drawn(workbench: Workbench, page: Page) -> None:
+    with_robot = _settled(page)
+    assert len(np.unique(with_robot.reshape(-1, 3), axis=0)) > 100, "the 3-D view looks empty"
+    workbench.show_robot.value = False
+    try:
+        assert _until_changed(page, with_robot) > 0.01, "hiding the robot changed almost nothing on screen"
+    finally:
+        workbench.show_robot.value = True
+
+
+def test_collision_checkbox_shows_collision_geometry(workbench: Workbench, page: Page) -> None:
+    before = _settled(page)
+    layer = workbench.collision_layer
+    assert layer is not None and not any(h.visible for h in layer.handles.values())
+    page.get_by_label("Show collision geometry").click()
+    try:
+        assert _wait_for(lambda: all(h.visible for h in layer.handles.values())), "the click did not reach the server"
+        assert _until_changed(page, before) > CHANGED, "showing the collision geometry changed nothing on screen"
+    finally:
+        page.get_by_label("Show collision geometry").click()
+        assert _wait_for(lambda: not any(h.visible for h in layer.handles.values()))
+
+
+def test_joint_slider_swings_the_arm(workbench: Workbench, page: Page) -> None:
+    workbench.part.value = "right"
+    robot = workbench.scene.robot
+    shoulder = int(robot.part_idx("right")[0])
+    before = _settled(page)
+    page.get_by_role("slider").first.focus()  # the arm's first joint: the shoulder
+    page.keyboard.press("Home")
+    try:
+        assert _wait_for(lambda: abs(workbench.q[shoulder] - robot.lower[shoulder]) < 0.02), "the slider did not move the joint"
+        assert _until_changed(page, before) > 0.005, "swinging the arm changed little on screen"
+    finally:
+        workbench.reset()
+
+
+def test_bad_task_file_shows_its_error(workbench: Workbench, page: Page, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "bad"\nrobot = "no_such_robot.toml"\n')
+    scene = workbench.scene
+    row = page.locator(".mantine-Flex-root", has=page.get_by_text("Task file", exact=True)).last
+    row.locator("input").fill(str(bad))
+    page.get_by_role("button", name="Load file").click()
+    page.get_by_text("Could not load the task").first.wait_for(timeout=10_000)
+    assert page.get_by_text("no_such_robot.toml").count() > 0
+    assert workbench.scene is scene, "a bad task file replaced the loaded task"

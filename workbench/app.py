@@ -1,0 +1,243 @@
+"""The workbench app: a viser server that shows a task, lets a person pose the robot and shows its collisions.
+
+It holds no planning logic: it loads a task with `planner.task`, builds the collision model with
+`planner.collision` and draws what comes back through one layer per concern.
+"""
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import numpy as np
+import viser
+
+from planner.collision import CollisionChecker, build_collision_model
+from planner.errors import RegraspError
+from planner.paths import ASSETS, DEFAULT_TASK
+from planner.task import Scene, load_task
+
+from .collision_layer import CollisionLayer
+from .robot_layer import RobotLayer
+from .scene_layer import SceneLayer
+
+TASKS_DIR = ASSETS / "tasks"
+CAMERA_POSITION = (2.1, -1.8, 1.8)  # front-right of the robot, above the desk
+CAMERA_LOOK_AT = (0.4, -0.05, 0.85)
+MAX_LISTED_PAIRS = 8
+
+
+def task_choices(current: Path) -> dict[str, Path]:
+    """Dropdown label -> file for the tasks in assets/tasks, plus the current task if it lives elsewhere."""
+    choices = {p.stem: p.resolve() for p in sorted(TASKS_DIR.glob("*.toml"))}
+    if current.resolve() not in choices.values():
+        choices[str(current)] = current.resolve()
+    return choices
+
+
+def _error_text(exc: Exception) -> str:
+    """A user-facing message: a RegraspError as is, anything else with its type."""
+    return str(exc) if isinstance(exc, RegraspError) else f"{type(exc).__name__}: {exc}"
+
+
+class Workbench:
+    """One viser server showing one task at a time; construct to start, `close()` to stop."""
+
+    def __init__(self, task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080):
+        scene = load_task(task or DEFAULT_TASK)  # a bad task named on the command line fails before serving
+        self.host = host
+        self.server = viser.ViserServer(host, port, label="regrasp", verbose=False)
+        self._lock = threading.RLock()
+        self._generation = 0
+        self.collision_ready = threading.Event()
+        self.scene: Scene = scene
+        self.q = scene.q_initial.copy()
+        self.robot_layer: RobotLayer | None = None
+        self.scene_layer: SceneLayer | None = None
+        self.collision_layer: CollisionLayer | None = None
+        self._checker: CollisionChecker | None = None
+        self._sliders: viser.GuiFolderHandle | None = None
+        self._slider_of: dict[int, viser.GuiSliderHandle] = {}
+        self._setup_view()
+        self._build_gui()
+        self._show(scene)
+
+    @property
+    def url(self) -> str:
+        """Where a browser finds the workbench."""
+        return f"http://{self.host}:{self.server.get_port()}"
+
+    def close(self) -> None:
+        """Stop the server; a collision model still being built is dropped."""
+        with self._lock:
+            self._generation += 1
+        self.server.stop()
+
+    def _setup_view(self) -> None:
+        """Plain lights (no HDRI: it can stall headless browsers), a floor grid and a front-right camera."""
+        scene = self.server.scene
+        scene.configure_environment_map(None)
+        scene.configure_default_lights(False)
+        scene.add_light_hemisphere("/lights/sky", sky_color=(255, 255, 255), ground_color=(120, 110, 100), intensity=1.6)
+        scene.add_light_directional("/lights/sun", intensity=1.8, position=(2.0, -1.5, 4.0))
+        scene.add_grid("/floor", width=4.0, height=4.0, cell_size=0.25, section_size=1.0)
+        self.server.initial_camera.position = CAMERA_POSITION
+        self.server.initial_camera.look_at = CAMERA_LOOK_AT
+        self.server.initial_camera.up = (0.0, 0.0, 1.0)
+
+    def _build_gui(self) -> None:
+        """The panel: task choice, view toggles, joint sliders of one part, collision status."""
+        gui = self.server.gui
+        with gui.add_folder("Task"):
+            self._task_files = task_choices(self.scene.source)
+            self.task_choice = gui.add_dropdown("Task", tuple(self._task_files), initial_value=self._label_of(self.scene.source))
+            self.task_path = gui.add_text("Task file", str(self.scene.source))
+            self.load_button = gui.add_button("Load file")
+            self.task_info = gui.add_markdown("")
+            self.task_error = gui.add_markdown("", visible=False)
+        with gui.add_folder("View"):
+            self.show_robot = gui.add_checkbox("Show robot", True)
+            self.show_collision = gui.add_checkbox("Show collision geometry", False)
+        with gui.add_folder("Joints") as self._joints:
+            parts = self.scene.robot.part_names()
+            self.part = gui.add_dropdown("Part", tuple(parts), initial_value=next((p for p in parts if p != "torso"), parts[0]), order=1.0)
+            self.reset_button = gui.add_button("Reset", order=3.0, hint="Back to the task's initial configuration")
+        self.collision_status = gui.add_markdown("")
+        self.task_choice.on_update(lambda e: self._load(self._task_files[e.target.value], e.client))
+        self.load_button.on_click(lambda e: self._load(Path(self.task_path.value.strip()).expanduser(), e.client))
+        self.show_robot.on_update(lambda e: self._set_robot_visible(e.target.value))
+        self.show_collision.on_update(lambda e: self._set_collision_shown(e.target.value))
+        self.part.on_update(lambda _: self._rebuild_sliders())
+        self.reset_button.on_click(lambda _: self.reset())
+
+    def _label_of(self, path: Path) -> str:
+        """The task dropdown's label for a task file."""
+        return next(label for label, p in self._task_files.items() if p == path.resolve())
+
+    def _load(self, path: Path, client: viser.ClientHandle | None) -> None:
+        """Load a task chosen in the GUI; a bad file shows its error and keeps the current task."""
+        if path.resolve() == self.scene.source:
+            return
+        self.task_error.visible = False
+        try:
+            scene = load_task(path)
+        except Exception as exc:  # a bad file must never take the workbench down
+            message = _error_text(exc)
+            self.task_error.content = f"**Could not load the task:** {message}"
+            self.task_error.visible = True
+            if client is not None:
+                client.add_notification("Could not load the task", message, color="red", auto_close_seconds=10.0)
+            return
+        self._show(scene)
+
+    def _show(self, scene: Scene) -> None:
+        """Replace the drawn task, reset the robot and start building the collision model."""
+        with self._lock:
+            self._generation += 1
+            for layer in (self.robot_layer, self.scene_layer, self.collision_layer):
+                if layer is not None:
+                    layer.remove()
+            self.collision_layer, self._checker = None, None
+            self.collision_ready.clear()
+            self.scene, self.q = scene, scene.q_initial.copy()
+            self.scene_layer = SceneLayer(self.server, scene)
+            self.robot_layer = RobotLayer(self.server, scene.robot, self.q)
+            self.robot_layer.visible = self.show_robot.value
+            self._task_files = task_choices(scene.source)
+            self.task_choice.options = tuple(self._task_files)
+            self.task_choice.value = self._label_of(scene.source)
+            self.task_path.value = str(scene.source)
+            self.task_info.content = f"**{scene.name}** — {scene.description}" if scene.description else f"**{scene.name}**"
+            self.part.options = tuple(scene.robot.part_names())
+            self._rebuild_sliders()
+            self.collision_status.content = "*Collisions: building the collision model…*"
+            threading.Thread(target=self._build_collisions, args=(scene, self._generation), daemon=True).start()
+
+    def _build_collisions(self, scene: Scene, generation: int) -> None:
+        """Background: build the collision model, then draw it (unless another task was loaded meanwhile)."""
+        try:
+            cm = build_collision_model(scene.robot, scene.environment)
+        except Exception as exc:  # shown in the GUI; the rest of the workbench stays usable
+            with self._lock:
+                if generation == self._generation:
+                    self.collision_status.content = f"**Collision model failed:** {_error_text(exc)}"
+            return
+        with self._lock:
+            if generation != self._generation:
+                return
+            self.collision_layer = CollisionLayer(self.server, cm)
+            self.collision_layer.shown = self.show_collision.value
+            self._checker = cm.checker()
+            self._refresh()
+            self.collision_ready.set()
+
+    def _rebuild_sliders(self) -> None:
+        """One slider per joint of the chosen part, within the joint limits, starting at the current q."""
+        with self._lock:
+            if self._sliders is not None:
+                self._sliders.remove()
+            robot, names = self.scene.robot, self.scene.robot.joint_names()
+            with self._joints:
+                self._sliders = self.server.gui.add_folder(None, order=2.0)
+            with self._sliders:
+                self._slider_of = {
+                    int(i): self.server.gui.add_slider(names[i].rsplit("/", 1)[-1], min=float(robot.lower[i]), max=float(robot.upper[i]),
+                                                       step=0.01, initial_value=float(self.q[i]))
+                    for i in robot.part_idx(self.part.value)
+                }
+            for i, slider in self._slider_of.items():
+                slider.on_update(lambda e, i=i: self.set_joint(i, e.target.value))
+
+    def set_joint(self, index: int, value: float) -> None:
+        """Move one joint (q index, clipped to its limits), keep its slider in step and redraw."""
+        with self._lock:
+            robot = self.scene.robot
+            value = float(np.clip(value, robot.lower[index], robot.upper[index]))
+            slider = self._slider_of.get(index)
+            if slider is not None and slider.value != value:
+                slider.value = value  # its callback comes back here with the same value
+                return
+            self.q[index] = value
+            self._refresh()
+
+    def reset(self) -> None:
+        """Back to the task's initial configuration."""
+        with self._lock:
+            self.q = self.scene.q_initial.copy()
+            self._rebuild_sliders()
+            self._refresh()
+
+    def _set_robot_visible(self, visible: bool) -> None:
+        with self._lock:
+            if self.robot_layer is not None:
+                self.robot_layer.visible = visible
+
+    def _set_collision_shown(self, shown: bool) -> None:
+        with self._lock:
+            if self.collision_layer is not None:
+                self.collision_layer.show(shown, self.q)
+
+    def _refresh(self) -> None:
+        """Redraw the robot at q, check it and paint the colliding geometries."""
+        assert self.robot_layer is not None
+        self.robot_layer.update(self.q)
+        if self._checker is None or self.collision_layer is None:
+            return
+        pairs = self._checker.colliding_pairs(self.q)
+        self.collision_layer.update(self.q, {name for pair in pairs for name in pair})
+        if not pairs:
+            self.collision_status.content = "Collisions: **none**"
+        else:
+            listed = ", ".join(f"`{a}` ↔ `{b}`" for a, b in pairs[:MAX_LISTED_PAIRS])
+            more = f" and {len(pairs) - MAX_LISTED_PAIRS} more" if len(pairs) > MAX_LISTED_PAIRS else ""
+            self.collision_status.content = f"<span style='color:#d22'>**{len(pairs)} colliding pairs:**</span> {listed}{more}"
+
+
+def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080) -> None:
+    """Start the workbench and serve until interrupted (Ctrl-C)."""
+    workbench = Workbench(task, host, port)
+    try:
+        workbench.server.sleep_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        workbench.close()
