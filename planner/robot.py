@@ -132,20 +132,36 @@ def _idx(model: pin.Model, names, spec: RobotSpec, field: str) -> np.ndarray:
     return np.asarray(out, dtype=int)
 
 
+def robot_joint_name(model: pin.Model, i: int) -> str:
+    """The name of the 1-DoF joint at configuration index i."""
+    return next(model.names[j] for j in range(1, model.njoints) if model.joints[j].idx_q == i)
+
+
 def build_robot(spec: RobotSpec) -> Robot:
     """Compose body + hands with pinocchio, lock the spec's locked joints, and index the parts."""
-    model, coll, vis = _load(spec.body_urdf.read_text(), spec.body_urdf)
+    try:
+        body_text = spec.body_urdf.read_text()
+    except UnicodeDecodeError as exc:
+        raise InputError(spec.source, "body.urdf", f"'{spec.body_urdf}' is not a text file; expected a URDF") from exc
+    model, coll, vis = _load(body_text, spec.body_urdf)
     for g in (coll, vis):
         _drop_geometry(g, model, spec.drop_geometry)
     for arm in spec.arms:
         hand = arm.hand
-        text = _prefixed_urdf(hand.urdf, hand.prefix)
+        try:
+            text = _prefixed_urdf(hand.urdf, hand.prefix)
+        except ET.ParseError as exc:
+            raise InputError(spec.source, f"arms.{arm.name}.hand.urdf", f"'{hand.urdf}' is not a URDF (not valid XML: {exc})") from exc
         hmodel, hcoll, hvis = _load(text, hand.urdf)
         if not model.existFrame(hand.mount_frame):
             raise InputError(spec.source, f"arms.{arm.name}.hand.mount_frame", f"no frame '{hand.mount_frame}' in the body URDF")
         mount = pin.SE3(pin.rpy.rpyToMatrix(*hand.mount_rpy), np.array(hand.mount_xyz))
         fid = model.getFrameId(hand.mount_frame)
-        model_c, coll = pin.appendModel(model, hmodel, coll, hcoll, fid, mount)
+        try:
+            model_c, coll = pin.appendModel(model, hmodel, coll, hcoll, fid, mount)
+        except ValueError as exc:  # pinocchio: "The two models have conflicting frame names."
+            raise InputError(spec.source, f"arms.{arm.name}.hand.prefix", f"the hand's link and joint names, prefixed with "
+                             f"'{hand.prefix}', clash with names already in the robot ({exc}); give each hand its own prefix") from exc
         _, vis = pin.appendModel(model, hmodel, vis, hvis, fid, mount)
         model = model_c
     base = pin.SE3(pin.rpy.rpyToMatrix(*spec.base_rpy), np.array(spec.base_xyz))
@@ -167,8 +183,12 @@ def build_robot(spec: RobotSpec) -> Robot:
                 raise InputError(spec.source, "body.locked_joints", f"joint '{n}' is not in the body URDF")
         q_ref = pin.neutral(model)
         ids = [model.getJointId(n) for n in names]
-        for jid, (_, value) in zip(ids, spec.locked_joints):
-            q_ref[model.joints[jid].idx_q] = value
+        for jid, (name, value) in zip(ids, spec.locked_joints):
+            i = model.joints[jid].idx_q
+            lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+            if not lo - 1e-9 <= value <= hi + 1e-9:
+                raise InputError(spec.source, f"body.locked_joints.{name}", f"joint '{name}' locked at {value}, outside its limits [{lo:.4g}, {hi:.4g}]")
+            q_ref[i] = value
         model, (coll, vis) = pin.buildReducedModel(model, [coll, vis], ids, q_ref)
     if model.nq != model.nv:
         raise InputError(spec.source, "body", "only revolute/prismatic joints are supported (nq must equal nv)")
@@ -192,6 +212,15 @@ def build_robot(spec: RobotSpec) -> Robot:
             raise InputError(spec.source, f"arms.{arm.name}.hand.palm_frame", f"no frame '{arm.hand.palm_frame}' in {arm.hand.urdf.name}")
         if not model.existFrame(arm.shoulder_frame):
             raise InputError(spec.source, f"arms.{arm.name}.shoulder_frame", f"no frame '{arm.shoulder_frame}' in the body URDF")
+    listed = [("body.torso_joints", torso_idx)] + [(f"arms.{a}.joints", i) for a, i in arm_idx.items()]
+    listed += [(f"arms.{a}.hand.fingers", i) for a, i in hand_idx.items()]
+    owner: dict[int, str] = {}
+    for fld, idx in listed:
+        for i in idx.tolist():
+            if i in owner:
+                name = robot_joint_name(model, i)
+                raise InputError(spec.source, owner[i], f"joint '{name}' is also listed in {fld}: a joint belongs to one part")
+            owner[i] = fld
     covered = np.concatenate([torso_idx, *arm_idx.values(), *hand_idx.values()])
     if sorted(covered.tolist()) != list(range(model.nq)):
         names = [model.names[j] for j in range(1, model.njoints) if model.joints[j].idx_q not in covered]
@@ -201,8 +230,10 @@ def build_robot(spec: RobotSpec) -> Robot:
     robot = Robot(spec, model, coll, vis, lower, upper, np.zeros(model.nq), torso_idx, arm_idx, hand_idx, finger_idx)
     q_rest = robot.configuration(rest_configuration_of(spec), base=np.clip(np.zeros(model.nq), lower, upper))
     if not robot.within_limits(q_rest):
-        bad = [n for n, v, lo, hi in zip(robot.joint_names(), q_rest, lower, upper) if not lo - 1e-9 <= v <= hi + 1e-9]
-        raise InputError(spec.source, "rest", f"rest configuration outside the joint limits for: {', '.join(bad)}")
+        bad = [i for i, (v, lo, hi) in enumerate(zip(q_rest, lower, upper)) if not lo - 1e-9 <= v <= hi + 1e-9]
+        fld = owner[bad[0]].replace(".joints", ".rest").replace(".hand.fingers", ".hand.fingers.open").replace("torso_joints", "torso_rest")
+        names = ", ".join(f"{robot_joint_name(model, i)} = {q_rest[i]:.4g} not in [{lower[i]:.4g}, {upper[i]:.4g}]" for i in bad)
+        raise InputError(spec.source, fld, f"rest configuration outside the joint limits: {names}")
     object.__setattr__(robot, "q_rest", q_rest)
     return robot
 
