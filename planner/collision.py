@@ -6,7 +6,8 @@ does); pairs never within `prune_margin` over `prune_samples` uniform samples ar
 set is computed once per robot spec and cached. Pairs between the two arms (hands included) are
 never pruned: the arms share a workspace, and uniform samples rarely bring the hands together. Robot-obstacle pairs collide within
 `env_padding` (a security margin, which the broad phase inflates its boxes by).
-A check runs pinocchio's dynamic-AABB-tree broad phase over the pairs of the requested subset.
+A check runs pinocchio's sweep-and-prune (SSaP) broad phase over the pairs of the requested subset
+(measured faster here than its dynamic AABB tree).
 """
 from __future__ import annotations
 
@@ -241,7 +242,7 @@ class CollisionChecker:
             for k in self.cm.subsets["env"]:
                 gd.collisionRequests[int(k)].security_margin = self.cm.params.env_padding
             self._gdata[subset] = gd
-            self._managers[subset] = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(self.model, self.cm.geometry, gd)
+            self._managers[subset] = pin.BroadPhaseManager_SSaPCollisionManager(self.model, self.cm.geometry, gd)
         return self._gdata[subset], self._managers[subset]
 
     def in_collision(self, q: np.ndarray, subset: str = "all") -> bool:
