@@ -1,0 +1,25 @@
+"""The pipeline: every step, in order. A new step plugs in by adding its STEP here."""
+from __future__ import annotations
+
+from . import arms
+from .errors import RegraspError
+from .steps import Step
+
+PIPELINE: tuple[Step, ...] = (arms.STEP,)
+
+
+def step_named(name: str) -> Step:
+    for step in PIPELINE:
+        if step.name == name:
+            return step
+    raise RegraspError(f"no step '{name}' (steps: {', '.join(s.name for s in PIPELINE)})")
+
+
+def steps_until(until: str | None) -> tuple[Step, ...]:
+    """The steps up to and including `until` (all of them when None)."""
+    if until is None:
+        return PIPELINE
+    names = [s.name for s in PIPELINE]
+    if until not in names:
+        raise RegraspError(f"no step '{until}' (steps: {', '.join(names)})")
+    return PIPELINE[: names.index(until) + 1]

@@ -1,0 +1,125 @@
+"""Step results: frozen dataclasses that write themselves into a session and read themselves back.
+
+Fields declared with `array(dtype, shape)` go to the step's `.npz` (shape entries: an int, or a
+name like "n" shared between fields, or None for any); every other field must be JSON-able
+(numbers, strings, bools, lists, dicts) and goes to the step's `.json`. Loading checks every
+array's dtype and shape and every JSON field's presence, with errors naming the file and field.
+"""
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+import zipfile
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+
+from .errors import InputError
+
+R = TypeVar("R")
+
+
+def array(dtype: str, shape: tuple[int | str | None, ...]) -> Any:
+    """Declare a numpy-array field of a result: saved to the .npz and checked on load."""
+    return dataclasses.field(metadata={"dtype": np.dtype(dtype).str, "shape": shape})
+
+
+def _is_array(f: dataclasses.Field) -> bool:
+    return "dtype" in f.metadata
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    """Write to a temporary file in the same folder, then rename: a crash never leaves half a file."""
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    _atomic_write(path, text.encode())
+
+
+def save_result(result: Any, folder: Path, stem: str) -> list[str]:
+    """Write a result as `<stem>.npz` (arrays) and `<stem>.json` (the rest); returns the file names."""
+    arrays, rest = {}, {}
+    for f in dataclasses.fields(result):
+        value = getattr(result, f.name)
+        if _is_array(f):
+            arrays[f.name] = np.ascontiguousarray(value, dtype=np.dtype(f.metadata["dtype"]))
+        else:
+            rest[f.name] = value
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    _atomic_write(folder / f"{stem}.npz", buf.getvalue())
+    atomic_write_text(folder / f"{stem}.json", json.dumps(rest, indent=1, default=_json_default))
+    return [f"{stem}.npz", f"{stem}.json"]
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return list(value)
+    raise TypeError(f"{type(value).__name__} is not JSON-able: declare it with results.array(...)")
+
+
+def load_result(cls: type[R], folder: Path, stem: str) -> R:
+    """Read a result written by `save_result`, checking every field; errors name the file and field."""
+    npz_path, json_path = folder / f"{stem}.npz", folder / f"{stem}.json"
+    for p in (npz_path, json_path):
+        if not p.is_file():
+            raise InputError(p, None, "missing: the session lists this step as finished but its file is gone")
+    try:
+        rest = json.loads(json_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(json_path, None, f"not valid JSON ({exc})") from exc
+    if not isinstance(rest, dict):
+        raise InputError(json_path, None, "expected a JSON object")
+    try:
+        with np.load(npz_path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        raise InputError(npz_path, None, f"not a readable .npz file (truncated or corrupt: {exc})") from exc
+    values: dict[str, Any] = {}
+    dims: dict[str, int] = {}
+    for f in dataclasses.fields(cls):
+        if _is_array(f):
+            if f.name not in arrays:
+                raise InputError(npz_path, f.name, "missing array")
+            values[f.name] = _checked(arrays[f.name], f, npz_path, dims)
+        else:
+            if f.name not in rest:
+                raise InputError(json_path, f.name, "missing field")
+            values[f.name] = rest[f.name]
+    unknown = set(rest) - set(values)
+    if unknown:
+        raise InputError(json_path, sorted(unknown)[0], f"unknown field (this version of {cls.__name__} does not have it)")
+    return cls(**values)
+
+
+def _checked(value: np.ndarray, f: dataclasses.Field, path: Path, dims: dict[str, int]) -> np.ndarray:
+    want_dtype, want_shape = np.dtype(f.metadata["dtype"]), f.metadata["shape"]
+    if value.dtype != want_dtype:
+        raise InputError(path, f.name, f"expected dtype {want_dtype}, got {value.dtype}")
+    if len(value.shape) != len(want_shape):
+        raise InputError(path, f.name, f"expected {len(want_shape)} dimensions {_shape_text(want_shape)}, got shape {value.shape}")
+    for got, want in zip(value.shape, want_shape):
+        if isinstance(want, int) and got != want:
+            raise InputError(path, f.name, f"expected shape {_shape_text(want_shape)}, got {value.shape}")
+        if isinstance(want, str):
+            if dims.setdefault(want, got) != got:
+                raise InputError(path, f.name, f"expected shape {_shape_text(want_shape)} with {want} = {dims[want]}, got {value.shape}")
+    value.setflags(write=False)
+    return value
+
+
+def _shape_text(shape: tuple) -> str:
+    return "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"

@@ -1,0 +1,84 @@
+"""The step framework: each pipeline stage is a `Step` with declared inputs, parameters and result.
+
+A step's `run(ctx)` is a function of the scene, the results of the steps it needs, its frozen
+parameters and a seeded generator; it returns a frozen result dataclass (see `results.py`) that
+has a `stats()` method giving its key figures. `pipeline.py` lists the steps in order.
+"""
+from __future__ import annotations
+
+import dataclasses
+import zlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import RegraspError
+from .task import Scene
+
+Progress = Callable[[float, str], None]
+
+
+def no_progress(fraction: float, message: str = "") -> None:
+    """A progress callback that reports nowhere."""
+
+
+@dataclass(frozen=True)
+class StepContext:
+    """What a step may use: nothing else passes between steps."""
+
+    scene: Scene
+    inputs: Mapping[str, Any]
+    params: Any
+    rng: np.random.Generator
+    progress: Progress = no_progress
+
+
+@dataclass(frozen=True)
+class Step:
+    """One pipeline stage."""
+
+    name: str
+    summary: str
+    needs: tuple[str, ...]
+    params: type
+    result: type
+    run: Callable[[StepContext], Any]
+
+    def make_params(self, values: Mapping[str, Any] | None = None) -> Any:
+        """The step's parameters: defaults overridden by `values`, with unknown names refused."""
+        values = dict(values or {})
+        known = {f.name for f in dataclasses.fields(self.params)}
+        unknown = set(values) - known
+        if unknown:
+            raise RegraspError(f"step '{self.name}' has no parameter {', '.join(sorted(unknown))} (parameters: {', '.join(sorted(known)) or 'none'})")
+        defaults = self.params()
+        for name, value in values.items():
+            expected = type(getattr(defaults, name))
+            if expected is float and isinstance(value, int) and not isinstance(value, bool):
+                value = float(value)
+            if not isinstance(value, expected):
+                raise RegraspError(f"step '{self.name}': parameter {name} expects {expected.__name__}, got {value!r}")
+            values[name] = value
+        return dataclasses.replace(defaults, **values)
+
+
+def step_seed(seed: int, name: str) -> int:
+    """The seed a step's generator gets: derived from the session seed and the step's name."""
+    return int(np.random.SeedSequence([seed, zlib.crc32(name.encode())]).generate_state(1)[0])
+
+
+def parse_assignment(text: str) -> tuple[str, str, Any]:
+    """'step.param=value' from the command line; the value is read as JSON when it parses, else a string."""
+    import json
+
+    key, sep, raw = text.partition("=")
+    step, dot, param = key.partition(".")
+    if not sep or not dot or not step or not param:
+        raise RegraspError(f"--set expects step.param=value, got '{text}'")
+    try:
+        value = json.loads(raw)
+    except json.JSONDecodeError:
+        value = raw
+    return step, param, value
