@@ -14,7 +14,7 @@ from .steps import Step, StepContext
 
 @dataclass(frozen=True)
 class ArmsParams:
-    seeds: int = 12  # IK starts per arm and placement
+    seeds: int = 32  # IK starts per arm and placement
     tolerance: float = 0.02  # m: grasp centre to the object's centre of mass
 
 

@@ -42,6 +42,62 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from .runner import run_pipeline
+    from .session import Session
+    from .steps import parse_assignment
+    from .task import load_task
+
+    params: dict[str, dict] = {}
+    for text in args.set or []:
+        step, name, value = parse_assignment(text)
+        params.setdefault(step, {})[name] = value
+    out = Path(args.out)
+    if args.resume and Session.exists(out):
+        session = Session.open(out)
+        print(f"resuming {out}: finished {', '.join(session.finished()) or 'nothing yet'}", file=sys.stderr)
+    else:
+        session = Session.create(out, load_task(args.task), args.seed, force=args.force)
+
+    def progress(step):
+        bar = tqdm(total=100, desc=f"{step.name:<14}", unit="%", leave=True, file=sys.stderr,
+                   bar_format="{desc} {bar} {n:.0f}% {postfix}")
+
+        def report(fraction: float, message: str = "") -> None:
+            bar.n = round(100 * min(max(fraction, 0.0), 1.0))
+            bar.set_postfix_str(message, refresh=False)
+            bar.refresh()
+            if fraction >= 1.0:
+                bar.close()
+        return report
+
+    ran = run_pipeline(session, args.until, params, progress)
+    print(f"{'step':<16}{'seconds':>9}  key figures")
+    for record in session.records:
+        figures = ", ".join(f"{k}={v}" for k, v in record["stats"].items())
+        mark = "" if record["name"] in ran else "  (earlier run)"
+        print(f"{record['name']:<16}{record['seconds']:>9.2f}  {figures}{mark}")
+    print(f"session written to {out}")
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from workbench.app import run
+
+    run(None, args.host, args.port, session=Path(args.session))
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from workbench.export import export_html
+
+    export_html(Path(args.session), Path(args.html))
+    print(f"wrote {args.html}")
+    return 0
+
+
 def _write_json(path: Path, data: dict) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data, indent=2))
@@ -60,6 +116,24 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("task", help="task file, or a name in assets/tasks")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_cmd_check)
+    pl = sub.add_parser("plan", help="run the pipeline headless into a session folder")
+    pl.add_argument("task", help="task file, or a name in assets/tasks")
+    pl.add_argument("--out", required=True, help="session folder to write")
+    pl.add_argument("--seed", type=int, default=0)
+    pl.add_argument("--until", help="last step to run (default: all)")
+    pl.add_argument("--resume", action="store_true", help="continue the session in --out where it stopped")
+    pl.add_argument("--force", action="store_true", help="replace an existing session in --out")
+    pl.add_argument("--set", action="append", metavar="STEP.PARAM=VALUE", help="a step parameter (repeatable)")
+    pl.set_defaults(func=_cmd_plan)
+    r = sub.add_parser("replay", help="open the workbench on a saved session")
+    r.add_argument("session", help="session folder")
+    r.add_argument("--host", default="127.0.0.1")
+    r.add_argument("--port", type=int, default=8080)
+    r.set_defaults(func=_cmd_replay)
+    e = sub.add_parser("export", help="export a saved session as one self-contained HTML file")
+    e.add_argument("session", help="session folder")
+    e.add_argument("--html", required=True, help="HTML file to write")
+    e.set_defaults(func=_cmd_export)
     b = sub.add_parser("bench", help="benchmarks, printed as tables")
     bsub = b.add_subparsers(dest="what", required=True)
     bc = bsub.add_parser("collision", help="collision checking and forward kinematics timings")

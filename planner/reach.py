@@ -58,7 +58,7 @@ def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, i
 
 
 def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray, rng: np.random.Generator,
-          seeds: int = 12, tolerance: float = 0.02) -> ReachResult:
+          seeds: int = 32, tolerance: float = 0.02) -> ReachResult:
     """Try `seeds` starts (rest first, then random torso+arm); reachable if one ends within tolerance, collision-free."""
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
     offset = grasp_centre(robot, arm)

@@ -1,7 +1,7 @@
 """Step results: frozen dataclasses that write themselves into a session and read themselves back.
 
 Fields declared with `array(dtype, shape)` go to the step's `.npz` (shape entries: an int, or a
-name like "n" shared between fields, or None for any); every other field must be JSON-able
+name like "n" shared between fields (the session fixes "nq" to the robot's DoF), or None for any); every other field must be JSON-able
 (numbers, strings, bools, lists, dicts) and goes to the step's `.json`. Loading checks every
 array's dtype and shape and every JSON field's presence, with errors naming the file and field.
 """
@@ -71,8 +71,10 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-able: declare it with results.array(...)")
 
 
-def load_result(cls: type[R], folder: Path, stem: str) -> R:
-    """Read a result written by `save_result`, checking every field; errors name the file and field."""
+def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | None = None) -> R:
+    """Read a result written by `save_result`, checking every field; errors name the file and field.
+
+    `dims` fixes named dimensions known from the scene (e.g. nq, the robot's DoF)."""
     npz_path, json_path = folder / f"{stem}.npz", folder / f"{stem}.json"
     for p in (npz_path, json_path):
         if not p.is_file():
@@ -89,7 +91,7 @@ def load_result(cls: type[R], folder: Path, stem: str) -> R:
     except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
         raise InputError(npz_path, None, f"not a readable .npz file (truncated or corrupt: {exc})") from exc
     values: dict[str, Any] = {}
-    dims: dict[str, int] = {}
+    dims = dict(dims or {})
     for f in dataclasses.fields(cls):
         if _is_array(f):
             if f.name not in arrays:

@@ -40,6 +40,7 @@ class Scene:
     object_final: np.ndarray
     q_initial: np.ndarray
     q_final: np.ndarray
+    meshes: dict[str, trimesh.Trimesh] = field(repr=False, default_factory=dict)  # every mesh the task names, by its task value
 
     def object_at(self, T: np.ndarray) -> trimesh.Trimesh:
         """The object mesh placed at a world pose."""
@@ -59,7 +60,15 @@ def _placement(tab: Table) -> np.ndarray:
     return pose(tab.vector("xyz", 3), tab.vector("rpy", 3, default=[0.0, 0.0, 0.0]))
 
 
-def _obstacle(tab: Table, base: Path) -> Obstacle:
+def _mesh(tab: Table, key: str, base: Path, meshes: dict[str, trimesh.Trimesh]) -> trimesh.Trimesh:
+    """The mesh a field names: from `meshes` when given (a replayed session), else from its file."""
+    value = tab.str(key)
+    if value not in meshes:
+        meshes[value] = load_object_mesh(BUILTIN_OBJECTS.get(value) or _path(tab, key, base, ASSETS / "objects"))
+    return meshes[value]
+
+
+def _obstacle(tab: Table, base: Path, meshes: dict[str, trimesh.Trimesh]) -> Obstacle:
     tab.check_keys({"name", "shape", "size", "xyz", "rpy", "color", "mesh"})
     shape = tab.str("shape")
     if shape not in SHAPES:
@@ -67,7 +76,7 @@ def _obstacle(tab: Table, base: Path) -> Obstacle:
     mesh = None
     size: tuple[float, ...] = ()
     if shape == "mesh":
-        mesh = load_object_mesh(_path(tab, "mesh", base, ASSETS / "objects"))
+        mesh = _mesh(tab, "mesh", base, meshes)
     else:
         size = tuple(tab.vector("size", SHAPES[shape]).tolist())
         if min(size) <= 0:
@@ -94,18 +103,23 @@ def _configuration(tab: Table, robot: Robot) -> np.ndarray:
     return robot.configuration(joints)
 
 
-def scene_from_dict(data: dict[str, Any], source: Path) -> Scene:
-    """Build a Scene from parsed task data (also used to replay the task embedded in a session)."""
-    root = Table(data, source)
+def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None = None,
+                    meshes: dict[str, trimesh.Trimesh] | None = None, field_prefix: str = "") -> Scene:
+    """Build a Scene from parsed task data.
+
+    A replayed session passes the robot spec and the meshes it embedded (`robot_path`, `meshes`),
+    and `field_prefix` so errors name the field inside the session file.
+    """
+    root = Table(data, source, field_prefix)
     root.check_keys({"name", "description", "robot", "object", "obstacles", "robot_initial", "robot_final"})
     base = source.parent
-    robot_path = _path(root, "robot", base, ASSETS / "robots")
-    robot = load_robot(robot_path)
+    robot = load_robot(robot_path or _path(root, "robot", base, ASSETS / "robots"))
+    meshes = dict(meshes or {})
     obj = root.table("object")
     obj.check_keys({"mesh", "initial", "final"})
     mesh_name = obj.str("mesh")
-    mesh_path = BUILTIN_OBJECTS.get(mesh_name) or _path(obj, "mesh", base, ASSETS / "objects")
-    obstacles = tuple(_obstacle(t, base) for t in root.tables("obstacles")) if root.has("obstacles") else ()
+    object_mesh = _mesh(obj, "mesh", base, meshes)
+    obstacles = tuple(_obstacle(t, base, meshes) for t in root.tables("obstacles")) if root.has("obstacles") else ()
     names = [o.name for o in obstacles]
     if len(set(names)) != len(names):
         raise root.error("obstacles", "obstacle names must be unique")
@@ -117,11 +131,12 @@ def scene_from_dict(data: dict[str, Any], source: Path) -> Scene:
         robot=robot,
         environment=obstacles,
         object_name=mesh_name,
-        object_mesh=load_object_mesh(mesh_path),
+        object_mesh=object_mesh,
         object_initial=_placement(obj.table("initial")),
         object_final=_placement(obj.table("final")),
         q_initial=_configuration(root.table("robot_initial", default={}), robot),
         q_final=_configuration(root.table("robot_final", default={}), robot),
+        meshes=meshes,
     )
 
 

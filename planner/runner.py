@@ -1,0 +1,40 @@
+"""Running the pipeline into a session: the next step, or every step up to a named one."""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from .pipeline import steps_until
+from .session import Session
+from .steps import Progress, Step, StepContext, no_progress, step_seed
+
+ProgressFactory = Callable[[Step], Progress]
+
+
+def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = None, progress: Progress = no_progress) -> Any:
+    """Run one step on the session's scene and earlier results, and record it."""
+    p = step.make_params(params)
+    seed = step_seed(session.seed, step.name)
+    inputs = {name: session.result(name) for name in step.needs}
+    ctx = StepContext(session.scene, inputs, p, np.random.default_rng(seed), progress)
+    start = time.perf_counter()
+    result = step.run(ctx)
+    session.record(step, p, seed, time.perf_counter() - start, result)
+    return result
+
+
+def run_pipeline(session: Session, until: str | None = None, params: Mapping[str, Mapping[str, Any]] | None = None,
+                 progress: ProgressFactory | None = None) -> list[str]:
+    """Run, in order, every step up to `until` that the session has not finished; returns their names."""
+    params = params or {}
+    done = set(session.finished())
+    ran = []
+    for step in steps_until(until):
+        if step.name in done:
+            continue
+        run_step(session, step, params.get(step.name), progress(step) if progress else no_progress)
+        ran.append(step.name)
+    return ran

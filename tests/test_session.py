@@ -1,0 +1,201 @@
+"""Sessions: exact round trips, replay without planning, resume after a kill, and every bad-session message."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner.errors import InputError, RegraspError
+from planner.pipeline import PIPELINE
+from planner.runner import run_pipeline
+from planner.session import MANIFEST, Session
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.array_equal(np.asarray(a), np.asarray(b)) and np.asarray(a).dtype == np.asarray(b).dtype
+    return json.loads(json.dumps(a)) == json.loads(json.dumps(b))
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory, default_scene):
+    """The whole pipeline run once on the default task, with its in-memory results."""
+    folder = tmp_path_factory.mktemp("planned") / "session"
+    session = Session.create(folder, default_scene, seed=3)
+    run_pipeline(session)
+    return folder, {name: session.result(name) for name in session.finished()}
+
+
+def test_round_trip_every_step_exactly(planned):
+    folder, results = planned
+    assert [s.name for s in PIPELINE] == list(results)
+    reopened = Session.open(folder)
+    for name, result in results.items():
+        loaded = reopened.result(name)
+        for f in dataclasses.fields(result):
+            assert _same(getattr(result, f.name), getattr(loaded, f.name)), f"{name}.{f.name} changed in the round trip"
+    manifest = json.loads((folder / MANIFEST).read_text())
+    assert {"format_version", "task", "versions", "steps"} <= set(manifest)
+    assert [set(r) for r in manifest["steps"]] == [{"name", "params", "seed", "seconds", "stats", "files"}] * len(PIPELINE)
+
+
+def test_replay_calls_no_planner_step(planned):
+    """Opening a session in the workbench draws every layer from saved results: no step may run."""
+    import socket
+
+    from workbench.app import Workbench
+
+    folder, _ = planned
+    originals = [s.run for s in PIPELINE]
+
+    def forbidden(ctx):
+        raise AssertionError("a planner step ran during replay")
+
+    for step in PIPELINE:
+        object.__setattr__(step, "run", forbidden)  # Step is frozen: patch for this test only
+    try:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        wb = Workbench(None, "127.0.0.1", port, session=folder)
+        try:
+            assert wb.session is not None and wb.session.finished() == [s.name for s in PIPELINE]
+        finally:
+            wb.close()
+    finally:
+        for step, original in zip(PIPELINE, originals):
+            object.__setattr__(step, "run", original)
+
+
+def test_existing_session_survives_without_force(planned, default_scene):
+    folder, _ = planned
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    with pytest.raises(RegraspError, match="already holds a session"):
+        Session.create(folder, default_scene, seed=3)
+    run = subprocess.run([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(folder)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "--force" in run.stderr and "Traceback" not in run.stderr
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def _plan(out: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(out), "--seed", "5", *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _step_files(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.glob("*")) if p.name not in (MANIFEST,)}
+
+
+@pytest.mark.slow
+def test_killed_plan_resumes_to_the_same_result(tmp_path):
+    whole = tmp_path / "whole"
+    assert _plan(whole).wait(timeout=600) == 0
+    cut = tmp_path / "cut"
+    proc = _plan(cut)
+    time.sleep(2.0)  # inside the first step (building the collision model takes longer)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    if (cut / MANIFEST).exists():
+        Session.open(cut)  # whatever was finished is readable
+    resumed = _plan(cut, "--resume") if (cut / MANIFEST).exists() else _plan(cut)
+    assert resumed.wait(timeout=600) == 0, resumed.stderr.read()
+    assert _step_files(cut) == _step_files(whole)
+    strip = lambda m: [{k: v for k, v in r.items() if k != "seconds"} for r in m["steps"]]
+    assert strip(json.loads((cut / MANIFEST).read_text())) == strip(json.loads((whole / MANIFEST).read_text()))
+
+
+@pytest.fixture
+def copy_of(planned, tmp_path):
+    import shutil
+
+    folder, _ = planned
+    target = tmp_path / "copy"
+    shutil.copytree(folder, target)
+    return target
+
+
+def _open_error(folder: Path) -> str:
+    with pytest.raises(InputError) as info:
+        Session.open(folder)
+    return str(info.value)
+
+
+def test_missing_npz(copy_of):
+    (copy_of / "arms.npz").unlink()
+    msg = _open_error(copy_of)
+    assert str(copy_of / "arms.npz") in msg and "missing" in msg
+
+
+def test_truncated_npz(copy_of):
+    data = (copy_of / "arms.npz").read_bytes()
+    (copy_of / "arms.npz").write_bytes(data[: len(data) // 2])
+    msg = _open_error(copy_of)
+    assert str(copy_of / "arms.npz") in msg and "truncated or corrupt" in msg
+
+
+def test_manifest_not_json(copy_of):
+    (copy_of / MANIFEST).write_text("{ not json")
+    msg = _open_error(copy_of)
+    assert str(copy_of / MANIFEST) in msg and "not valid JSON" in msg
+
+
+def test_newer_format_version(copy_of):
+    manifest = json.loads((copy_of / MANIFEST).read_text())
+    manifest["format_version"] = 99
+    (copy_of / MANIFEST).write_text(json.dumps(manifest))
+    msg = _open_error(copy_of)
+    assert "format_version" in msg and "newer regrasp" in msg
+
+
+def _rewrite_arms_array(folder: Path, name: str, value: np.ndarray) -> None:
+    with np.load(folder / "arms.npz") as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays[name] = value
+    np.savez(folder / "arms.npz", **arrays)
+
+
+def test_array_of_wrong_shape(copy_of):
+    _rewrite_arms_array(copy_of, "q_pick", np.zeros(7))
+    msg = _open_error(copy_of)
+    assert str(copy_of / "arms.npz") in msg and "q_pick" in msg and "shape" in msg
+
+
+def test_array_of_wrong_dtype(copy_of):
+    _rewrite_arms_array(copy_of, "q_place", np.zeros(49, dtype=np.float32))
+    msg = _open_error(copy_of)
+    assert "q_place" in msg and "dtype float64" in msg
+
+
+def test_embedded_task_with_unknown_field(copy_of):
+    manifest = json.loads((copy_of / MANIFEST).read_text())
+    manifest["task"]["colour"] = "red"
+    (copy_of / MANIFEST).write_text(json.dumps(manifest))
+    msg = _open_error(copy_of)
+    assert str(copy_of / MANIFEST) in msg and "task.colour" in msg and "unknown field" in msg
+
+
+def test_unknown_step_in_manifest(copy_of):
+    manifest = json.loads((copy_of / MANIFEST).read_text())
+    manifest["steps"][0]["name"] = "teleport"
+    (copy_of / MANIFEST).write_text(json.dumps(manifest))
+    msg = _open_error(copy_of)
+    assert "steps[0].name" in msg and "teleport" in msg
+
+
+def test_branch_keeps_the_original(planned, tmp_path):
+    folder, results = planned
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    session = Session.open(folder)
+    new = session.branch(tmp_path / "branch", before=PIPELINE[0].name)
+    assert new.finished() == []
+    run_pipeline(new, params={"arms": {"seeds": 40}})
+    assert new.record_of("arms")["params"]["seeds"] == 40
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
