@@ -5,11 +5,17 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import RegraspError
 from .paths import DEFAULT_TASK
+
+if TYPE_CHECKING:
+    import trimesh
+
+    from .robot_spec import RobotSpec
 
 
 def _cmd_workbench(args: argparse.Namespace) -> int:
@@ -98,6 +104,84 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_roadmap(args: argparse.Namespace) -> int:
+    import time
+
+    from tqdm import tqdm
+
+    from .roadmap import RoadmapParams, roadmap_for
+    from .roadmap.result import render_stats
+    from .roadmap.step import session_roadmap_seed
+    from .task import load_task
+
+    scene = load_task(args.task)
+    params = RoadmapParams(nodes=args.nodes, tree=args.tree)
+    bar = tqdm(total=100, desc="roadmap", unit="%", file=sys.stderr, bar_format="{desc} {bar} {n:.0f}% {postfix}")
+
+    def progress(fraction: float, message: str = "") -> None:
+        bar.n = round(100 * min(max(fraction, 0.0), 1.0))
+        bar.set_postfix_str(message, refresh=False)
+        bar.refresh()
+
+    start = time.perf_counter()
+    roadmap, cached = roadmap_for(scene, params, session_roadmap_seed(args.seed), not args.no_cache, progress)
+    bar.close()
+    stats = roadmap.stats()
+    print(render_stats(stats))
+    loaded = time.perf_counter() - start
+    print(f"loaded from the cache in {loaded:.2f} s" if cached else f"built in {loaded:.2f} s (cached for next time)")
+    if args.json:
+        _write_json(Path(args.json), {**stats, "cached": cached, "wall_seconds": round(loaded, 3)})
+    return 0
+
+
+def _cmd_grasps(args: argparse.Namespace) -> int:
+    import dataclasses
+    import math
+
+    from tqdm import tqdm
+
+    from .grasps import GraspParams, grasp_list
+
+    robot_spec, mesh, what = _grasp_inputs(args)
+    params = GraspParams()
+    if args.frames is not None:
+        params = dataclasses.replace(params, orientations=max(1, math.ceil(args.frames / params.positions)))
+    bar = tqdm(total=100, desc=f"{args.hand} grasps", unit="%", file=sys.stderr, bar_format="{desc} {bar} {n:.0f}% {postfix}")
+
+    def progress(fraction: float, message: str = "") -> None:
+        bar.n = round(100 * min(max(fraction, 0.0), 1.0))
+        bar.set_postfix_str(message, refresh=False)
+        bar.refresh()
+
+    result, cached = grasp_list(robot_spec, args.hand, mesh, params, args.seed, progress, use_cache=not args.no_cache)
+    bar.close()
+    s = result.stats()
+    rows = [("frames tried", s["frames"], ""), ("contacts found", s["contacts_found"], "grasps with >= 3 contacts"),
+            ("force-closed", s["force_closed"], ""), ("kept", s["kept"], "ranked, near-duplicates removed"),
+            ("time", f"{result.seconds:.1f} s", "from the cache" if cached else "")]
+    print(f"grasp list of the {args.hand} hand on {what}")
+    print("\n".join(f"  {name:<15} {value!s:>8}  {note}".rstrip() for name, value, note in rows))
+    if args.json:
+        _write_json(Path(args.json), result.to_json())
+    return 0
+
+
+def _grasp_inputs(args: argparse.Namespace) -> tuple[RobotSpec, trimesh.Trimesh, str]:
+    """The robot spec, the object mesh and a label, from --task or from --robot and --object."""
+    from .object_mesh import load_object_mesh
+    from .robot_spec import load_robot_spec
+    from .task import BUILTIN_OBJECTS, load_task
+
+    if args.robot or args.object:
+        if not (args.robot and args.object) or args.task:
+            raise RegraspError("give either --task, or both --robot and --object")
+        mesh_path = BUILTIN_OBJECTS.get(args.object, Path(args.object))
+        return load_robot_spec(args.robot), load_object_mesh(mesh_path), f"{mesh_path.name} ({args.robot})"
+    scene = load_task(args.task or DEFAULT_TASK)
+    return scene.robot.spec, scene.object_mesh, f"{scene.object_name} (task {scene.name})"
+
+
 def _write_json(path: Path, data: dict) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data, indent=2))
@@ -134,6 +218,24 @@ def parser() -> argparse.ArgumentParser:
     e.add_argument("session", help="session folder")
     e.add_argument("--html", required=True, help="HTML file to write")
     e.set_defaults(func=_cmd_export)
+    rm = sub.add_parser("roadmap", help="build (or load from the cache) the offline roadmap and print its statistics")
+    rm.add_argument("--task", default=str(DEFAULT_TASK))
+    rm.add_argument("--nodes", type=int, default=50, help="nodes per elementary roadmap")
+    rm.add_argument("--seed", type=int, default=0, help="session seed (the same roadmap as a session with this seed)")
+    rm.add_argument("--tree", action="store_true", help="the tree variant: SG edges only between different components")
+    rm.add_argument("--no-cache", action="store_true", help="rebuild even when a cached roadmap exists")
+    rm.add_argument("--json", help="also write the statistics to this JSON file")
+    rm.set_defaults(func=_cmd_roadmap)
+    g = sub.add_parser("grasps", help="compute (or load from the cache) one hand's single-grasp list and print its summary")
+    g.add_argument("--task", help="task file (default: the paper's task)")
+    g.add_argument("--robot", help="robot spec (with --object, instead of --task)")
+    g.add_argument("--object", help="object mesh file, or 'statuette' (with --robot)")
+    g.add_argument("--hand", required=True, help="the arm whose hand grasps, e.g. right or left")
+    g.add_argument("--frames", type=int, help="about this many grasp frames (positions x orientations)")
+    g.add_argument("--seed", type=int, default=0, help="turns the orientation grid and shifts the position grid")
+    g.add_argument("--no-cache", action="store_true", help="recompute even when a cached list exists")
+    g.add_argument("--json", help="also write the list to this JSON file")
+    g.set_defaults(func=_cmd_grasps)
     b = sub.add_parser("bench", help="benchmarks, printed as tables")
     bsub = b.add_subparsers(dest="what", required=True)
     bc = bsub.add_parser("collision", help="collision checking and forward kinematics timings")

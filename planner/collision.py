@@ -11,6 +11,7 @@ A check runs pinocchio's sweep-and-prune (SSaP) broad phase over the pairs of th
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import json
@@ -36,6 +37,7 @@ class CollisionParams:
     prune_margin: float = 0.05  # m: a pair never closer than this in the samples is pruned
     prune_samples: int = 4000
     env_padding: float = 0.01  # m: robot-obstacle pairs count as colliding closer than this
+    self_padding: float = 0.0  # m: robot-robot pairs count as colliding closer than this
     seed: int = 0
 
 
@@ -183,6 +185,10 @@ class CollisionModel:
     def checker(self) -> "CollisionChecker":
         return CollisionChecker(self)
 
+    def with_subsets(self, extra: dict[str, np.ndarray]) -> "CollisionModel":
+        """The same model with more named pair subsets (pair indices), for a caller's own checks."""
+        return dataclasses.replace(self, subsets={**self.subsets, **extra})
+
 
 def build_collision_model(robot: Robot, environment: Environment = (), params: CollisionParams = CollisionParams(),
                           use_cache: bool = True) -> CollisionModel:
@@ -241,6 +247,9 @@ class CollisionChecker:
                 gd.deactivateCollisionPair(int(k))
             for k in self.cm.subsets["env"]:
                 gd.collisionRequests[int(k)].security_margin = self.cm.params.env_padding
+            if self.cm.params.self_padding:
+                for k in self.cm.subsets["self"]:
+                    gd.collisionRequests[int(k)].security_margin = self.cm.params.self_padding
             self._gdata[subset] = gd
             self._managers[subset] = pin.BroadPhaseManager_SSaPCollisionManager(self.model, self.cm.geometry, gd)
         return self._gdata[subset], self._managers[subset]

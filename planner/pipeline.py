@@ -1,11 +1,11 @@
 """The pipeline: every step, in order. A new step plugs in by adding its STEP here."""
 from __future__ import annotations
 
-from . import arms
+from . import arms, grasps, roadmap
 from .errors import RegraspError
 from .steps import Step
 
-PIPELINE: tuple[Step, ...] = (arms.STEP,)
+PIPELINE: tuple[Step, ...] = (arms.STEP, grasps.PICK_STEP, grasps.PLACE_STEP, roadmap.STEP)
 
 
 def step_named(name: str) -> Step:

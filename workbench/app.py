@@ -1,7 +1,8 @@
-"""The workbench app: a viser server that shows a task, lets a person pose the robot and shows its collisions.
+"""The workbench app: a viser server that shows a task or a session, lets a person pose the robot and shows its collisions.
 
-It holds no planning logic: it loads a task with `planner.task`, builds the collision model with
-`planner.collision` and draws what comes back through one layer per concern.
+It holds no planning logic: it loads a task with `planner.task` or a session with `planner.session`,
+builds the collision model with `planner.collision` and draws what comes back through one layer per
+concern (the session's steps through `session_layers`; the Session panel runs steps via `planner.runner`).
 """
 from __future__ import annotations
 
@@ -12,17 +13,20 @@ import numpy as np
 import viser
 
 from planner.collision import CollisionChecker, build_collision_model
-from planner.errors import RegraspError
 from planner.paths import ASSETS, DEFAULT_TASK
+from planner.session import Session
 from planner.task import Scene, load_task
 
 from .collision_layer import CollisionLayer
+from .notify import error_text
 from .robot_layer import RobotLayer
 from .scene_layer import SceneLayer
+from .session_layers import SessionLayers
+from .session_panel import SessionPanel
+from .session_store import SESSIONS_DIR
+from .view import setup_view
 
 TASKS_DIR = ASSETS / "tasks"
-CAMERA_POSITION = (2.1, -1.8, 1.8)  # front-right of the robot, above the desk
-CAMERA_LOOK_AT = (0.4, -0.05, 0.85)
 MAX_LISTED_PAIRS = 8
 
 
@@ -34,16 +38,14 @@ def task_choices(current: Path) -> dict[str, Path]:
     return choices
 
 
-def _error_text(exc: Exception) -> str:
-    """A user-facing message: a RegraspError as is, anything else with its type."""
-    return str(exc) if isinstance(exc, RegraspError) else f"{type(exc).__name__}: {exc}"
-
-
 class Workbench:
-    """One viser server showing one task at a time; construct to start, `close()` to stop."""
+    """One viser server showing one task, or one session of a task, at a time; construct to start, `close()` to stop."""
 
-    def __init__(self, task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080):
-        scene = load_task(task or DEFAULT_TASK)  # a bad task named on the command line fails before serving
+    def __init__(self, task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080,
+                 session: str | Path | None = None, sessions_dir: Path = SESSIONS_DIR):
+        # a bad task or session named on the command line fails before serving
+        opened = Session.open(session) if session is not None else None
+        scene = opened.scene if opened is not None else load_task(task or DEFAULT_TASK)
         self.host = host
         self.server = viser.ViserServer(host, port, label="regrasp", verbose=False)
         self._lock = threading.RLock()
@@ -54,12 +56,15 @@ class Workbench:
         self.robot_layer: RobotLayer | None = None
         self.scene_layer: SceneLayer | None = None
         self.collision_layer: CollisionLayer | None = None
+        self.session: Session | None = None
+        self.session_layers: SessionLayers | None = None
         self._checker: CollisionChecker | None = None
         self._sliders: viser.GuiFolderHandle | None = None
         self._slider_of: dict[int, viser.GuiSliderHandle] = {}
-        self._setup_view()
-        self._build_gui()
-        self._show(scene)
+        self._syncing_choices = False  # True while _show rewrites the task dropdown: its callbacks must not load a task
+        setup_view(self.server)
+        self._build_gui(sessions_dir)
+        self._show(scene, opened)
 
     @property
     def url(self) -> str:
@@ -72,20 +77,8 @@ class Workbench:
             self._generation += 1
         self.server.stop()
 
-    def _setup_view(self) -> None:
-        """Plain lights (no HDRI: it can stall headless browsers), a floor grid and a front-right camera."""
-        scene = self.server.scene
-        scene.configure_environment_map(None)
-        scene.configure_default_lights(False)
-        scene.add_light_hemisphere("/lights/sky", sky_color=(255, 255, 255), ground_color=(120, 110, 100), intensity=1.6)
-        scene.add_light_directional("/lights/sun", intensity=1.8, position=(2.0, -1.5, 4.0))
-        scene.add_grid("/floor", width=4.0, height=4.0, cell_size=0.25, section_size=1.0)
-        self.server.initial_camera.position = CAMERA_POSITION
-        self.server.initial_camera.look_at = CAMERA_LOOK_AT
-        self.server.initial_camera.up = (0.0, 0.0, 1.0)
-
-    def _build_gui(self) -> None:
-        """The panel: task choice, view toggles, joint sliders of one part, collision status."""
+    def _build_gui(self, sessions_dir: Path) -> None:
+        """The panel: task choice, view toggles, the session, joint sliders of one part, collision status."""
         gui = self.server.gui
         with gui.add_folder("Task"):
             self._task_files = task_choices(self.scene.source)
@@ -97,15 +90,18 @@ class Workbench:
         with gui.add_folder("View"):
             self.show_robot = gui.add_checkbox("Show robot", True)
             self.show_collision = gui.add_checkbox("Show collision geometry", False)
+            self.show_steps = gui.add_checkbox("Show step results", True)
+        self.session_panel = SessionPanel(self, sessions_dir)
         with gui.add_folder("Joints") as self._joints:
             parts = self.scene.robot.part_names()
             self.part = gui.add_dropdown("Part", tuple(parts), initial_value=next((p for p in parts if p != "torso"), parts[0]), order=1.0)
             self.reset_button = gui.add_button("Reset", order=3.0, hint="Back to the task's initial configuration")
         self.collision_status = gui.add_markdown("")
-        self.task_choice.on_update(lambda e: self._load(self._task_files[e.target.value], e.client))
+        self.task_choice.on_update(lambda e: None if self._syncing_choices else self._load(self._task_files[e.target.value], e.client))
         self.load_button.on_click(lambda e: self._load(Path(self.task_path.value.strip()).expanduser(), e.client))
         self.show_robot.on_update(lambda e: self._set_robot_visible(e.target.value))
         self.show_collision.on_update(lambda e: self._set_collision_shown(e.target.value))
+        self.show_steps.on_update(lambda e: self._set_steps_visible(e.target.value))
         self.part.on_update(lambda _: self._rebuild_sliders())
         self.reset_button.on_click(lambda _: self.reset())
 
@@ -121,7 +117,7 @@ class Workbench:
         try:
             scene = load_task(path)
         except Exception as exc:  # a bad file must never take the workbench down
-            message = _error_text(exc)
+            message = error_text(exc)
             self.task_error.content = f"**Could not load the task:** {message}"
             self.task_error.visible = True
             if client is not None:
@@ -129,8 +125,26 @@ class Workbench:
             return
         self._show(scene)
 
-    def _show(self, scene: Scene) -> None:
-        """Replace the drawn task, reset the robot and start building the collision model."""
+    def show_session(self, session: Session) -> None:
+        """Draw a session: its step layers, and its scene too when it is not the one shown."""
+        with self._lock:
+            if session.scene is self.scene:
+                self._draw_session(session)
+            else:
+                self._show(session.scene, session)
+
+    def _draw_session(self, session: Session | None) -> None:
+        """Replace the step layers with those of `session` (drawn from its saved results) and refresh the panel."""
+        if self.session_layers is not None:
+            self.session_layers.remove()
+        self.session = session
+        self.session_layers = SessionLayers(self.server, session) if session is not None else None
+        if self.session_layers is not None:
+            self.session_layers.visible = self.show_steps.value
+        self.session_panel.shown(session, self.session_layers)
+
+    def _show(self, scene: Scene, session: Session | None = None) -> None:
+        """Replace the drawn task (and session), reset the robot and start building the collision model."""
         with self._lock:
             self._generation += 1
             for layer in (self.robot_layer, self.scene_layer, self.collision_layer):
@@ -143,13 +157,18 @@ class Workbench:
             self.robot_layer = RobotLayer(self.server, scene.robot, self.q)
             self.robot_layer.visible = self.show_robot.value
             self._task_files = task_choices(scene.source)
-            self.task_choice.options = tuple(self._task_files)
-            self.task_choice.value = self._label_of(scene.source)
+            self._syncing_choices = True  # viser calls on_update synchronously, within this block
+            try:
+                self.task_choice.options = tuple(self._task_files)
+                self.task_choice.value = self._label_of(scene.source)
+            finally:
+                self._syncing_choices = False
             self.task_path.value = str(scene.source)
             self.task_info.content = f"**{scene.name}** — {scene.description}" if scene.description else f"**{scene.name}**"
             self.part.options = tuple(scene.robot.part_names())
             self._rebuild_sliders()
             self.collision_status.content = "*Collisions: building the collision model…*"
+            self._draw_session(session)
             threading.Thread(target=self._build_collisions, args=(scene, self._generation), daemon=True).start()
 
     def _build_collisions(self, scene: Scene, generation: int) -> None:
@@ -159,7 +178,7 @@ class Workbench:
         except Exception as exc:  # shown in the GUI; the rest of the workbench stays usable
             with self._lock:
                 if generation == self._generation:
-                    self.collision_status.content = f"**Collision model failed:** {_error_text(exc)}"
+                    self.collision_status.content = f"**Collision model failed:** {error_text(exc)}"
             return
         with self._lock:
             if generation != self._generation:
@@ -201,8 +220,12 @@ class Workbench:
 
     def reset(self) -> None:
         """Back to the task's initial configuration."""
+        self.pose_robot(self.scene.q_initial)
+
+    def pose_robot(self, q: np.ndarray) -> None:
+        """Put the robot at configuration q: sliders follow, collisions are checked."""
         with self._lock:
-            self.q = self.scene.q_initial.copy()
+            self.q = np.array(q, dtype=float)
             self._rebuild_sliders()
             self._refresh()
 
@@ -210,6 +233,11 @@ class Workbench:
         with self._lock:
             if self.robot_layer is not None:
                 self.robot_layer.visible = visible
+
+    def _set_steps_visible(self, visible: bool) -> None:
+        with self._lock:
+            if self.session_layers is not None:
+                self.session_layers.visible = visible
 
     def _set_collision_shown(self, shown: bool) -> None:
         with self._lock:
@@ -232,9 +260,9 @@ class Workbench:
             self.collision_status.content = f"<span style='color:#d22'>**{len(pairs)} colliding pairs:**</span> {listed}{more}"
 
 
-def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080) -> None:
-    """Start the workbench and serve until interrupted (Ctrl-C)."""
-    workbench = Workbench(task, host, port)
+def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080, session: str | Path | None = None) -> None:
+    """Start the workbench (on a task, or replaying a saved session) and serve until interrupted (Ctrl-C)."""
+    workbench = Workbench(task, host, port, session=session)
     try:
         workbench.server.sleep_forever()
     except KeyboardInterrupt:

@@ -50,14 +50,19 @@ def decompose(robot: Robot) -> Decomposition:
     return Decomposition(arms, robot.torso_idx.copy(), {a: robot.arm_idx[a].copy() for a in arms}, robot.q_rest.copy())
 
 
-def _supports(cm: CollisionModel) -> np.ndarray:
-    """(n_geometries, nq) bool: the joints whose motion moves each geometry (none for obstacles)."""
+def relative_joints(cm: CollisionModel) -> np.ndarray:
+    """(n_pairs, nq) bool: the joints whose motion changes each pair's relative pose.
+
+    A joint above both geometries moves them rigidly together, so it is not one of them.
+    """
     model = cm.robot.model
-    out = np.zeros((len(cm.geometry.geometryObjects), model.nq), dtype=bool)
+    support = np.zeros((len(cm.geometry.geometryObjects), model.nq), dtype=bool)
     for g, obj in enumerate(cm.geometry.geometryObjects):
         for j in list(model.supports[obj.parentJoint])[1:]:
-            out[g, model.joints[j].idx_q] = True
-    return out
+            support[g, model.joints[j].idx_q] = True
+    first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
+    second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
+    return support[first] ^ support[second]
 
 
 def pair_subsets(cm: CollisionModel, dec: Decomposition) -> dict[str, np.ndarray]:
@@ -71,10 +76,9 @@ def pair_subsets(cm: CollisionModel, dec: Decomposition) -> dict[str, np.ndarray
     """
     first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
     second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
-    support = _supports(cm)
-    relative = support[first] ^ support[second]
-    moving = relative[:, dec.transit].any(axis=1)
-    group = np.array([p.removesuffix("_hand") for p in cm.parts] + ["env"] * (len(support) - cm.n_robot_geoms))
+    moving = relative_joints(cm)[:, dec.transit].any(axis=1)
+    n_env = len(cm.geometry.geometryObjects) - cm.n_robot_geoms
+    group = np.array([p.removesuffix("_hand") for p in cm.parts] + ["env"] * n_env)
     ga, gb = group[first], group[second]
     k = np.arange(len(first))
     out = {"moving": k[moving], "mixed": k[moving & ~((ga == gb) & np.isin(ga, dec.arms))]}
@@ -83,11 +87,3 @@ def pair_subsets(cm: CollisionModel, dec: Decomposition) -> dict[str, np.ndarray
         out[f"sub/{arm}"] = k[moving & ~np.isin(ga, others) & ~np.isin(gb, others)]
         out[f"cross/{arm}"] = k[moving & ((ga == arm) != (gb == arm))]
     return out
-
-
-def moving_pairs(cm: CollisionModel, joints: np.ndarray) -> np.ndarray:
-    """Pair indices whose relative pose changes when the given configuration indices move."""
-    first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
-    second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
-    support = _supports(cm)
-    return np.flatnonzero((support[first] ^ support[second])[:, joints].any(axis=1))

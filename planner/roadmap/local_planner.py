@@ -1,85 +1,128 @@
-"""The local planner: straight lines in joint space, checked at a bound on how far any robot point moves.
+"""The local planner: straight lines in joint space, checked densely enough that nothing is missed.
 
-Resolution: along q(s) = qa + s (qb - qa), a point of the robot moves at most sum_j |dq_j| R_j, where
-R_j bounds the distance from joint j's axis to any point of the geometry it carries (link lengths down
-the chain + the hull's bounding sphere; configuration-independent). A segment is checked at
-n = ceil(sum_j |dq_j| R_j / step) + 1 evenly spaced configurations, so no point moves more than
-`step` between two checks and every point of the continuous motion is within step / 2 of a checked
-position. With robot-obstacle pairs padded by p_env and robot-robot pairs by p_self, a segment whose
-checks all pass keeps obstacle distance >= p_env - step / 2 and robot-robot distance >= p_self - step
-along the whole continuous motion (see `CollisionParams` and `RoadmapParams`).
-The checks run in van der Corput order (midpoint first), so colliding segments fail early.
+Resolution (a bound on how far robot points move, not a joint-space step): along
+q(s) = qa + s (qb - qa), a point of geometry g moves at most sum_j |dq_j| r_j(g), where r_j(g)
+bounds the distance from joint j's axis to g (link offsets down the chain + g's farthest hull
+vertex, configuration-independent). Relative to each other, the two geometries of a pair move at
+most the sum of both bounds over the joints that change their relative pose (joints above both
+move them rigidly together), and their distance changes no faster than that. A pair padded by p
+(checked as colliding closer than p) whose checks pass at configurations between which it moves at
+most 2 (p - c) keeps distance >= c along the whole continuous motion: every intermediate relative
+position is within (p - c) of a checked one. A segment is checked at the fewest evenly spaced
+configurations that satisfy this for every pair of the subset, in van der Corput order (midpoint
+first) so that colliding segments fail early.
 """
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 
-from ..collision import CollisionChecker, CollisionModel
+from ..collision import CollisionModel
+from .decomposition import relative_joints
 
 
-def joint_radii(cm: CollisionModel) -> np.ndarray:
-    """(nq,) R_j: an upper bound on the distance from joint j's axis to any robot geometry it moves."""
+def geometry_radii(cm: CollisionModel) -> np.ndarray:
+    """(n_geometries, nq) r_j(g): a bound on the distance from joint j's axis to geometry g (0 unless j moves g).
+
+    The first offset below j counts only across the axis (rotating about the axis keeps it); the
+    rest of the chain counts in full; the geometry's own extent is its farthest hull vertex
+    (a bounding sphere for primitives).
+    """
     model = cm.robot.model
-    radii = np.zeros(model.nq)
-    for obj in cm.geometry.geometryObjects[: cm.n_robot_geoms]:
+    axes = _axes(model)
+    radii = np.zeros((len(cm.geometry.geometryObjects), model.nq))
+    for g, obj in enumerate(cm.geometry.geometryObjects[: cm.n_robot_geoms]):
         geom = obj.geometry
-        geom.computeLocalAABB()
-        reach = float(np.linalg.norm(obj.placement.act(np.asarray(geom.aabb_center)))) + float(geom.aabb_radius)
+        if hasattr(geom, "points"):
+            pts = np.asarray(geom.points()) @ obj.placement.rotation.T + obj.placement.translation
+            reach = float(np.linalg.norm(pts, axis=1).max())
+        else:
+            geom.computeLocalAABB()
+            reach = float(np.linalg.norm(obj.placement.act(np.asarray(geom.aabb_center)))) + float(geom.aabb_radius)
         chain = list(model.supports[obj.parentJoint])[1:]
         for i, j in enumerate(chain):
             if not model.joints[j].shortname().startswith(("JointModelR", "JointModelRevolute")):
                 raise ValueError(f"joint '{model.names[j]}' is not revolute: the displacement bound assumes revolute joints")
-            down = sum(np.linalg.norm(model.jointPlacements[k].translation) for k in chain[i + 1:])
-            q = model.joints[j].idx_q
-            radii[q] = max(radii[q], down + reach)
+            offsets = [model.jointPlacements[k].translation for k in chain[i + 1:]]
+            across = offsets[0] - axes[j] * (offsets[0] @ axes[j]) if offsets else np.zeros(3)
+            rest = sum(float(np.linalg.norm(t)) for t in offsets[1:])
+            radii[g, model.joints[j].idx_q] = float(np.linalg.norm(across)) + rest + reach
     return radii
 
 
-def segment_steps(qa: np.ndarray, qb: np.ndarray, radii: np.ndarray, step: float) -> np.ndarray:
-    """Number of configurations checked on each segment qa[i] -> qb[i] (vectorised; both ends included)."""
-    sweep = np.abs(np.atleast_2d(qb) - np.atleast_2d(qa)) @ radii
-    return np.ceil(sweep / step).astype(int) + 1
+def _axes(model: pin.Model) -> np.ndarray:
+    """(njoints, 3) each revolute joint's rotation axis in its own frame (row 0: the universe, unused)."""
+    data = model.createData()
+    pin.computeJointJacobians(model, data, pin.neutral(model))
+    axes = np.zeros((model.njoints, 3))
+    for j in range(1, model.njoints):
+        axes[j] = pin.getJointJacobian(model, data, j, pin.LOCAL)[3:, model.joints[j].idx_v]
+    return axes
 
 
 def van_der_corput(n: int) -> np.ndarray:
     """The n parameters 0, 1/(n-1), ..., 1 in bisection order: ends first, then midpoints, coarse to fine."""
     if n <= 1:
         return np.zeros(max(n, 0))
-    order, seen = [0, n - 1], {0, n - 1}
+    order = [0, n - 1]
     intervals = [(0, n - 1)]
     while intervals:
-        nxt = []
+        finer = []
         for a, b in intervals:
             if b - a > 1:
                 m = (a + b) // 2
-                if m not in seen:
-                    seen.add(m)
-                    order.append(m)
-                nxt += [(a, m), (m, b)]
-        intervals = nxt
+                order.append(m)
+                finer += [(a, m), (m, b)]
+        intervals = finer
     return np.asarray(order, dtype=float) / (n - 1)
 
 
-class SegmentChecker:
-    """Checks straight segments for one collision model at one resolution (per process: owns a checker)."""
+def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float) -> np.ndarray:
+    """(n_pairs,) p - c per pair: how much closer than its padding a pair may come between checks."""
+    out = np.full(len(cm.geometry.collisionPairs), cm.params.self_padding - self_clearance)
+    out[cm.subsets["env"]] = cm.params.env_padding - env_clearance
+    if np.any(out <= 0):
+        raise ValueError("each padding must exceed the clearance it guarantees")
+    return out
 
-    def __init__(self, cm: CollisionModel, step: float, checker: CollisionChecker | None = None):
-        self.checker = checker or cm.checker()
-        self.radii = joint_radii(cm)
-        self.step = step
+
+def _maximal_rows(rows: np.ndarray) -> np.ndarray:
+    """The rows not dominated elementwise by another (the max of w . |dq| over rows only needs these)."""
+    rows = np.unique(rows, axis=0)
+    keep: list[np.ndarray] = []
+    for row in rows[np.argsort(-rows.sum(axis=1))]:
+        if not any(np.all(row <= k) for k in keep):
+            keep.append(row)
+    return np.array(keep).reshape(-1, rows.shape[1])
+
+
+class SegmentChecker:
+    """Checks configurations and straight segments against named pair subsets (one per process)."""
+
+    def __init__(self, cm: CollisionModel, env_clearance: float, self_clearance: float = 0.0):
+        self.cm = cm
+        self.checker = cm.checker()
+        radii = geometry_radii(cm)
+        first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
+        second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
+        sweep = relative_joints(cm) * (radii[first] + radii[second])
+        per_pair = sweep / (2.0 * allowances(cm, env_clearance, self_clearance))[:, None]
+        self._weights = {name: _maximal_rows(per_pair[idx]) for name, idx in cm.subsets.items()}
 
     @property
     def checks(self) -> int:
         return self.checker.checks
 
+    def steps(self, qa: np.ndarray, qb: np.ndarray, subset: str) -> np.ndarray:
+        """Configurations checked on each segment qa[i] -> qb[i] (vectorised; both ends included)."""
+        sweep = np.abs(np.atleast_2d(qb) - np.atleast_2d(qa)) @ self._weights[subset].T
+        return np.ceil(sweep.max(axis=1, initial=0.0)).astype(int) + 1
+
     def free(self, q: np.ndarray, subset: str) -> bool:
         return not self.checker.in_collision(q, subset)
 
     def segment_free(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> bool:
-        """True if every check of the segment passes (ends skipped when already known free)."""
-        n = int(segment_steps(qa, qb, self.radii, self.step)[0])
-        s = van_der_corput(n)
-        if not ends:
-            s = s[2:]
+        """True if every check of the segment passes (`ends=False`: the two ends are known free)."""
+        s = van_der_corput(int(self.steps(qa, qb, subset)[0]))
         dq = qb - qa
-        return not any(self.checker.in_collision(qa + t * dq, subset) for t in s)
+        return not any(self.checker.in_collision(qa + t * dq, subset) for t in (s if ends else s[2:]))

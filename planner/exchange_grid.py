@@ -1,0 +1,44 @@
+"""The exchange position (paper V-C, figure 6): a 3-D grid node minimising the wrists' travel.
+
+Cost of a node e: ig + ge + ef for the picking wrist (initial -> grasp -> exchange -> final) plus
+ie + ep + pf for the placing wrist (initial -> exchange -> place -> final). The terms that do not
+involve e are constant, but are kept so the cost is the full distance the paper minimises.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class WristWaypoints:
+    """Wrist positions (world, m) of the picking arm (initial, grasp, final) and placing arm (initial, place, final)."""
+
+    pick_initial: np.ndarray
+    pick_grasp: np.ndarray
+    pick_final: np.ndarray
+    place_initial: np.ndarray
+    place_place: np.ndarray
+    place_final: np.ndarray
+
+
+def grid_nodes(lower: np.ndarray, upper: np.ndarray, step: float) -> np.ndarray:
+    """Nodes of a regular grid covering the box [lower, upper] (x fastest, then y, then z)."""
+    axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(lower, upper)]
+    zz, yy, xx = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    return np.c_[xx.ravel(), yy.ravel(), zz.ravel()]
+
+
+def exchange_costs(nodes: np.ndarray, w: WristWaypoints) -> np.ndarray:
+    """ig + ge + ef + ie + ep + pf for every node (vectorised)."""
+    d = lambda a, b: np.linalg.norm(np.asarray(a) - np.asarray(b), axis=-1)
+    fixed = d(w.pick_initial, w.pick_grasp) + d(w.place_place, w.place_final)
+    return fixed + d(w.pick_grasp, nodes) + d(nodes, w.pick_final) + d(w.place_initial, nodes) + d(nodes, w.place_place)
+
+
+def best_nodes(costs: np.ndarray, free: np.ndarray, keep: int) -> np.ndarray:
+    """Indices of the `keep` cheapest collision-free nodes, cheapest first (ties by index: deterministic)."""
+    candidates = np.flatnonzero(free)
+    order = np.lexsort((candidates, costs[candidates]))
+    return candidates[order[:keep]]

@@ -1,0 +1,91 @@
+"""The roadmap step's parameters and result: elementary roadmaps and Super Graph as numpy arrays."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..results import array
+
+
+@dataclass(frozen=True)
+class RoadmapParams:
+    """How the offline roadmap is built (all part of its cache key)."""
+
+    nodes: int = 50  # nodes per elementary roadmap (Vis-PRM stops there)
+    radius: float = 3.0  # rad: a guard's visibility range (joint-space distance over a sub-system's joints)
+    max_failures: int = 300  # Vis-PRM also stops after this many useless samples in a row
+    env_padding: float = 0.03  # m: robot-obstacle pairs are checked as colliding closer than this ...
+    env_clearance: float = 0.01  # m: ... and keep this distance along every motion (the project's margin)
+    self_padding: float = 0.015  # m: robot-robot pairs are checked colliding closer than this, and keep >= 0
+    mixed_edges: bool = False  # also SG edges whose common part switches source along two elementary edges
+    tree: bool = False  # the tree variant: SG edges only between different connected components
+
+
+@dataclass(frozen=True)
+class Roadmap:
+    """Per-arm Vis-PRM roadmaps and their Super Graph (paper V-A).
+
+    Elementary nodes are full configurations (the other arm and the hands at the hold configuration);
+    `elem_arm` says whose roadmap each belongs to. A Super Graph node is the pair `node_elem` (one
+    elementary node per arm, in `arms` order) with the common part from arm `node_common`. `wrists`
+    holds each node's two wrist positions (the hands' mount frames), for drawing. Edges carry their
+    joint-space length and a validity flag, so a later phase can mark them invalid.
+    """
+
+    arms: list
+    resolution: dict
+    timings: dict  # stage -> seconds
+    checks: dict  # stage -> collision checks
+    candidates: dict  # 'nodes' / 'edges' -> how many were tested
+    vis_prm_samples: dict  # arm -> samples drawn
+    elem_q: np.ndarray = array("float64", ("ne", "nq"))
+    elem_arm: np.ndarray = array("int8", ("ne",))
+    elem_guard: np.ndarray = array("bool", ("ne",))
+    elem_edges: np.ndarray = array("int64", ("me", 2))
+    node_q: np.ndarray = array("float64", ("n", "nq"))
+    node_elem: np.ndarray = array("int64", ("n", 2))
+    node_common: np.ndarray = array("int8", ("n",))
+    node_component: np.ndarray = array("int64", ("n",))
+    wrists: np.ndarray = array("float64", ("n", 2, 3))
+    edges: np.ndarray = array("int64", ("m", 2))
+    edge_length: np.ndarray = array("float64", ("m",))
+    edge_valid: np.ndarray = array("bool", ("m",))
+
+    def elementary(self, arm: str) -> tuple[np.ndarray, np.ndarray]:
+        """(node ids into elem_q, edges as node id pairs) of one arm's elementary roadmap."""
+        a = self.arms.index(arm)
+        ids = np.flatnonzero(self.elem_arm == a)
+        return ids, self.elem_edges[self.elem_arm[self.elem_edges[:, 0]] == a]
+
+    def stats(self) -> dict:
+        return {
+            "nodes": int(len(self.node_q)),
+            "edges": int(len(self.edges)),
+            "components": int(len(np.unique(self.node_component))),
+            "largest_component": int(np.bincount(self.node_component).max(initial=0)),
+            "collision_checks": int(sum(self.checks.values())),
+            "seconds": round(float(sum(self.timings.values())), 3),
+            "elementary_nodes": {a: int(np.sum(self.elem_arm == i)) for i, a in enumerate(self.arms)},
+            "elementary_edges": {a: int(len(self.elementary(a)[1])) for a in self.arms},
+            "candidate_nodes": int(self.candidates["nodes"]),
+            "candidate_edges": int(self.candidates["edges"]),
+            "stage_seconds": {k: round(float(v), 3) for k, v in self.timings.items()},
+            "stage_checks": {k: int(v) for k, v in self.checks.items()},
+            "resolution": self.resolution,
+        }
+
+
+def render_stats(stats: dict) -> str:
+    """The statistics table of `Roadmap.stats()`, as printed by `regrasp roadmap`."""
+    lines = [f"{name:<22}{stats[key]:>12}" for name, key in (("nodes", "nodes"), ("edges", "edges"), ("components", "components"),
+                                                          ("largest component", "largest_component"),
+                                                          ("collision checks", "collision_checks"))]
+    for arm, n in stats["elementary_nodes"].items():
+        lines.append(f"{'elementary ' + arm:<22}{n:>12} nodes {stats['elementary_edges'][arm]:>6} edges")
+    for stage, seconds in stats["stage_seconds"].items():
+        lines.append(f"{stage + ' (s)':<22}{seconds:>12.2f} {stats['stage_checks'][stage]:>12} checks")
+    lines.append(f"{'total (s)':<22}{stats['seconds']:>12.2f}")
+    res = stats["resolution"]
+    lines.append(f"resolution: {res['bound']}: {res['obstacle_step_m']} m to obstacles, {res['robot_step_m']} m to the robot")
+    return "\n".join(lines)

@@ -1,0 +1,58 @@
+"""The roadmap step: build the offline roadmap or load it from the user cache (keyed by all it depends on)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..collision import CODE_VERSION as PAIRS_VERSION
+from ..results import load_result, save_result
+from ..steps import Progress, Step, StepContext, no_progress, step_seed
+from ..task import Scene
+from ..user_cache import cache_key as hash_key
+from ..user_cache import cache_path
+from .build import build_roadmap
+from .result import Roadmap, RoadmapParams
+
+CODE_VERSION = "roadmap-1"
+
+
+def cache_key(scene: Scene, params: RoadmapParams, seed: int) -> str:
+    """A hash of the robot spec and its URDFs, the obstacles, the parameters, the seed and the code version."""
+    robot = scene.robot
+    parts: list[str | bytes] = [CODE_VERSION, PAIRS_VERSION, robot.spec.text(), repr((params, seed))]
+    parts += [Path(p).read_bytes() for p in [robot.spec.body_urdf] + [a.hand.urdf for a in robot.spec.arms]]
+    for ob in scene.environment:
+        parts += [repr((ob.name, ob.shape, ob.size)), ob.pose.tobytes()]
+        if ob.mesh is not None:
+            parts += [ob.mesh.vertices.tobytes(), ob.mesh.faces.tobytes()]
+    return hash_key(*parts)
+
+
+def roadmap_for(scene: Scene, params: RoadmapParams, seed: int, use_cache: bool = True,
+                progress: Progress = no_progress) -> tuple[Roadmap, bool]:
+    """(the roadmap, whether it came from the cache); a built roadmap is written to the cache."""
+    path = cache_path("roadmaps", cache_key(scene, params, seed))
+    if use_cache and path.with_suffix(".json").is_file():
+        return load_result(Roadmap, path.parent, path.name), True
+    roadmap = build_roadmap(scene, params, seed, progress)
+    save_result(roadmap, path.parent, path.name)
+    return roadmap, False
+
+
+def seed_of(rng: np.random.Generator) -> int:
+    """The roadmap's seed, drawn from the step's generator (so the session seed decides it)."""
+    return int(rng.integers(2**63))
+
+
+def session_roadmap_seed(session_seed: int) -> int:
+    """The seed a session with this seed builds its roadmap with (for the command line)."""
+    return seed_of(np.random.default_rng(step_seed(session_seed, NAME)))
+
+
+def run(ctx: StepContext) -> Roadmap:
+    return roadmap_for(ctx.scene, ctx.params, seed_of(ctx.rng), progress=ctx.progress)[0]
+
+
+NAME = "roadmap"
+STEP = Step(NAME, "offline per-arm Vis-PRM roadmaps merged into the Super Graph (V-A)", (), RoadmapParams, Roadmap, run)

@@ -1,0 +1,49 @@
+"""Every finished step of a session drawn by its layer, from the saved results (nothing is recomputed)."""
+from __future__ import annotations
+
+import numpy as np
+import viser
+
+from planner.session import Session
+
+from .layers import LAYERS, StepLayer
+from .notify import error_text
+
+ROOT = "/steps"
+
+
+class SessionLayers:
+    """Owns one layer per finished step that has one (see `layers.LAYERS`); other steps are only listed.
+
+    A layer that fails to draw is dropped and its error kept in `errors`, so one bad layer never hides the rest."""
+
+    def __init__(self, server: viser.ViserServer, session: Session, root: str = ROOT):
+        self.root = server.scene.add_frame(root, show_axes=False)
+        self.layers: dict[str, StepLayer] = {}
+        self.errors: dict[str, str] = {}
+        for name in session.finished():
+            if name in LAYERS:
+                layer = LAYERS[name](server, session.scene, f"{root}/{name}")
+                try:
+                    layer.update(session.result(name))
+                except Exception as exc:  # a drawing bug must not take the replay down
+                    layer.remove()
+                    self.errors[name] = error_text(exc)
+                    continue
+                self.layers[name] = layer
+
+    def poses(self) -> dict[str, np.ndarray]:
+        """The robot configurations every layer offers, by label, in pipeline order."""
+        return {label: q for layer in self.layers.values() for label, q in layer.poses.items()}
+
+    @property
+    def visible(self) -> bool:
+        return self.root.visible
+
+    @visible.setter
+    def visible(self, value: bool) -> None:
+        self.root.visible = value
+
+    def remove(self) -> None:
+        """Take every layer out of the scene."""
+        self.root.remove()

@@ -1,0 +1,300 @@
+"""The Session panel: save and load sessions, the step table, runs in the background, re-run from here, export.
+
+It holds no planning logic: runs go through `planner.runner`, and the workbench draws the session
+that comes back. The workbench never writes into a folder it loaded: runs go into a scratch
+session (a loaded one is first branched into it), Save copies into `sessions/<name>` and re-run
+branches into a new `sessions/<name>-rerun-N`.
+"""
+from __future__ import annotations
+
+import re
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import viser
+
+from planner.errors import RegraspError
+from planner.pipeline import PIPELINE, step_named, steps_until
+from planner.runner import ProgressFactory, run_pipeline
+from planner.session import Session
+from planner.steps import Progress, Step
+
+from .export import scene_html
+from .notify import error_text, notify_all
+from .param_inputs import ParamInputs, recorded_params
+from .session_layers import SessionLayers
+from .session_store import check_name, free_name, list_sessions, save_copy, scratch_copy, scratch_folder
+from .step_table import step_table
+
+if TYPE_CHECKING:
+    from .app import Workbench
+
+INITIAL = "task: initial configuration"
+NO_SESSIONS = "(no saved sessions)"
+
+
+class SessionPanel:
+    """The 'Session' GUI folder and its actions (also callable from code: tests drive them directly)."""
+
+    def __init__(self, workbench: Workbench, sessions_dir: Path):
+        self.wb = workbench
+        self.sessions_dir = sessions_dir
+        self.job: threading.Thread | None = None
+        self._scratch: Path | None = None  # the session folder the GUI created; the only one runs write into
+        self._poses: dict[str, np.ndarray] = {}
+        self._params: ParamInputs | None = None
+        gui = workbench.server.gui
+        names = tuple(s.name for s in PIPELINE)
+        with gui.add_folder("Session"):
+            self.message = gui.add_markdown("", visible=False)
+            self.table = gui.add_markdown(step_table(None))
+            self.robot_at = gui.add_dropdown("Robot at", (INITIAL,), hint="Show the robot at a configuration a step found")
+            self.name = gui.add_text("Name", "untitled")
+            self.save_button = gui.add_button("Save", hint="Save the current session as sessions/<name>")
+            self.saved = gui.add_dropdown("Saved", self._saved_options())
+            self.load_button = gui.add_button("Load", hint="Replay a saved session: nothing is recomputed")
+            self.seed = gui.add_number("Seed", 0, step=1, hint="The seed of a session started here")
+            self.next_button = gui.add_button("Run the next step")
+            self.until = gui.add_dropdown("Up to", names, initial_value=names[-1])
+            self.until_button = gui.add_button("Run up to this step")
+            self.progress = gui.add_progress_bar(0.0, visible=False)
+            self.progress_text = gui.add_markdown("", visible=False)
+            with gui.add_folder("Re-run from here", expand_by_default=False):
+                self.rerun_step = gui.add_dropdown("Step", names)
+                self._params_folder = gui.add_folder("Parameters")
+                self.rerun_button = gui.add_button("Re-run into a new session")
+            self.export_button = gui.add_button("Export HTML", hint="Download what is shown as one HTML file that plays offline")
+        self._buttons = (self.save_button, self.load_button, self.next_button, self.until_button, self.rerun_button)
+        self.robot_at.on_update(lambda e: self._pose_chosen(e.target.value))
+        self.save_button.on_click(lambda e: self._save_clicked(e.client))
+        self.load_button.on_click(lambda _: self._load_clicked())
+        self.next_button.on_click(lambda _: self.run_next())
+        self.until_button.on_click(lambda _: self.run_until(self.until.value))
+        self.rerun_step.on_update(lambda _: self._rebuild_params())
+        self.rerun_button.on_click(lambda _: self.rerun(self.rerun_step.value, self._params.values() if self._params else {}))
+        self.export_button.on_click(lambda e: self._export(e.client))
+        self._rebuild_params()
+
+    # -- what is shown ---------------------------------------------------------------------------
+
+    def shown(self, session: Session | None, layers: SessionLayers | None) -> None:
+        """Refresh the panel for the session the workbench now draws (None: just a task)."""
+        self.table.content = step_table(session)
+        self.saved.options = self._saved_options()
+        self._poses = {INITIAL: self.wb.scene.q_initial, **(layers.poses() if layers is not None else {})}
+        for name, message in (layers.errors if layers is not None else {}).items():
+            self._say(f"Could not draw {name}", message, error=True)
+        self.robot_at.options = tuple(self._poses)
+        self.robot_at.value = INITIAL
+        if session is not None and session.folder != self._scratch:
+            self.name.value = session.folder.name
+        self._rebuild_params()
+
+    def _say(self, title: str, body: str, error: bool = False) -> None:
+        """A message in the panel and a notification in every tab."""
+        color = "#d22" if error else "#2a6"
+        self.message.content = f"<span style='color:{color}'>**{title}:**</span> {body}"
+        self.message.visible = True
+        notify_all(self.wb.server, title, body, error)
+
+    def _saved_options(self) -> tuple[str, ...]:
+        return tuple(list_sessions(self.sessions_dir)) or (NO_SESSIONS,)
+
+    def _pose_chosen(self, label: str) -> None:
+        if label in self._poses:
+            self.wb.pose_robot(self._poses[label])
+
+    def _rebuild_params(self) -> None:
+        """Inputs for the chosen step's parameters, starting at the values the current session used."""
+        if self._params is not None:
+            self._params.remove()
+        step, session = step_named(self.rerun_step.value), self.wb.session
+        used = session.record_of(step.name)["params"] if session is not None and step.name in session.finished() else {}
+        with self._params_folder:
+            self._params = ParamInputs(self.wb.server.gui, step, used)
+
+    # -- load and save ---------------------------------------------------------------------------
+
+    def _load_clicked(self) -> None:
+        if self.saved.value == NO_SESSIONS:
+            self._say("Nothing to load", f"{self.sessions_dir} holds no sessions yet", error=True)
+        else:
+            self.load(self.sessions_dir / self.saved.value)
+
+    def load(self, folder: Path) -> bool:
+        """Replay a saved session; a bad one shows its error and leaves the workbench as it was."""
+        if self._refuse_while_busy():
+            return False
+        try:
+            session = Session.open(folder)
+        except Exception as exc:  # a bad session must never take the workbench down
+            self._say("Could not load the session", error_text(exc), error=True)
+            return False
+        self._scratch = None
+        self.message.visible = False
+        self.wb.show_session(session)
+        return True
+
+    def save(self, name: str, overwrite: bool = False) -> Session:
+        """Copy the current session into `sessions/<name>`; an existing folder is replaced only with `overwrite`."""
+        if self.wb.session is None:
+            raise RegraspError("nothing to save: run a step or load a session first")
+        saved = save_copy(self.wb.session, self.sessions_dir / check_name(name), overwrite)
+        self.saved.options = self._saved_options()
+        self.saved.value = saved.folder.name
+        return saved
+
+    def _save_clicked(self, client: viser.ClientHandle) -> None:
+        """Save under the name field; an existing folder is replaced only after the person confirms."""
+        if self._refuse_while_busy():
+            return
+        try:
+            name = check_name(self.name.value)
+            if self.wb.session is not None and (self.sessions_dir / name).exists():
+                self._say("Not saved", f"sessions/{name} already exists: confirm in the dialog to overwrite it")
+                self._confirm_overwrite(client, name)
+                return
+            self._save_reporting(name, overwrite=False)
+        except RegraspError as exc:
+            self._say("Not saved", str(exc), error=True)
+
+    def _save_reporting(self, name: str, overwrite: bool) -> None:
+        try:
+            saved = self.save(name, overwrite)
+        except RegraspError as exc:
+            self._say("Not saved", str(exc), error=True)
+            return
+        self._say("Saved", f"the session is in {saved.folder}")
+
+    def _confirm_overwrite(self, client: viser.ClientHandle, name: str) -> None:
+        """A dialog on the asking tab: overwrite sessions/<name>, or cancel."""
+        with client.gui.add_modal(f"Overwrite sessions/{name}?") as modal:
+            client.gui.add_markdown(f"`{self.sessions_dir / name}` already exists. Replace it with the current session?")
+            overwrite = client.gui.add_button("Overwrite", color="red")
+            cancel = client.gui.add_button("Cancel")
+
+        def confirmed(_: Any) -> None:
+            modal.close()
+            self._save_reporting(name, overwrite=True)
+
+        overwrite.on_click(confirmed)
+        cancel.on_click(lambda _: modal.close())
+
+    # -- runs ------------------------------------------------------------------------------------
+
+    def run_next(self) -> threading.Thread | None:
+        """Run the first step the current session has not finished."""
+        done = set(self.wb.session.finished()) if self.wb.session is not None else set()
+        pending = [s.name for s in PIPELINE if s.name not in done]
+        if not pending:
+            self._say("Nothing to run", "every step of the pipeline has run")
+            return None
+        return self.run_until(pending[0])
+
+    def run_until(self, until: str) -> threading.Thread | None:
+        """Run every unfinished step up to `until` in the background (into the scratch session)."""
+        done = set(self.wb.session.finished()) if self.wb.session is not None else set()
+        todo = [s for s in steps_until(until) if s.name not in done]
+        if not todo:
+            self._say("Nothing to run", f"every step up to {until} has run")
+            return None
+
+        def work() -> None:
+            session = self._working_session()
+            try:
+                run_pipeline(session, until, None, self._progress_factory(todo))
+            finally:
+                self.wb.show_session(session)
+        return self._start(work)
+
+    def rerun(self, step: str, values: dict[str, Any]) -> threading.Thread | None:
+        """Re-run from `step` with new parameters into a new session `<name>-rerun-N`; the current one stays intact.
+
+        Later steps the current session had finished run again with the parameters they used."""
+        session = self.wb.session
+        if session is None:
+            self._say("Nothing to re-run", "load a session or run a step first", error=True)
+            return None
+        try:
+            base = check_name(self.name.value) if session.folder == self._scratch else session.folder.name
+        except RegraspError as exc:
+            self._say("Not re-run", str(exc), error=True)
+            return None
+        target = self.sessions_dir / free_name(self.sessions_dir, re.sub(r"-rerun-\d+$", "", base))
+        order = [s.name for s in PIPELINE]
+        until = order[max([order.index(step), *(order.index(n) for n in session.finished())])]
+        params = {r["name"]: recorded_params(step_named(r["name"]), r["params"]) for r in session.records}
+        params[step] = values
+
+        def work() -> None:
+            new = session.branch(target, before=step)
+            todo = [s for s in steps_until(until) if s.name not in new.finished()]
+            try:
+                run_pipeline(new, until, params, self._progress_factory(todo))
+            finally:
+                self._scratch = None
+                self.wb.show_session(new)
+                self.saved.options = self._saved_options()
+            self._say("Re-ran", f"from {step} into {target}; {session.folder} is unchanged")
+        return self._start(work)
+
+    def _working_session(self) -> Session:
+        """The session runs write into: the scratch one, else a new scratch one (a copy of the loaded session)."""
+        session = self.wb.session
+        if session is not None and session.folder == self._scratch:
+            return session
+        new = Session.create(scratch_folder(), self.wb.scene, int(self.seed.value)) if session is None else scratch_copy(session)
+        self._scratch = new.folder
+        return new
+
+    def _progress_factory(self, todo: list[Step]) -> ProgressFactory:
+        """Per step, a callback moving the progress bar over this run's share of that step."""
+        names = [s.name for s in todo]
+
+        def factory(step: Step) -> Progress:
+            i = names.index(step.name)
+
+            def report(fraction: float, message: str = "") -> None:
+                self.progress.value = round(100 * (i + min(max(fraction, 0.0), 1.0)) / len(names), 1)
+                self.progress_text.content = f"*{step.name}* ({i + 1}/{len(names)}): {message}"
+            return report
+        return factory
+
+    def _start(self, work: Callable[[], None]) -> threading.Thread | None:
+        """Run `work` in a background thread with the run buttons disabled and the progress bar shown."""
+        if self._refuse_while_busy():
+            return None
+        for button in self._buttons:
+            button.disabled = True
+        self.progress.value, self.progress.visible = 0.0, True
+        self.progress_text.content, self.progress_text.visible = "*starting…*", True
+        self.message.visible = False
+
+        def body() -> None:
+            try:
+                work()
+            except Exception as exc:  # shown in the GUI; the workbench stays usable
+                self._say("Run failed", error_text(exc), error=True)
+            finally:
+                for button in self._buttons:
+                    button.disabled = False
+                self.progress.visible = self.progress_text.visible = False
+        self.job = threading.Thread(target=body, daemon=True)
+        self.job.start()
+        return self.job
+
+    def _refuse_while_busy(self) -> bool:
+        busy = self.job is not None and self.job.is_alive() and self.job is not threading.current_thread()
+        if busy:
+            self._say("Busy", "wait for the current run to finish", error=True)
+        return busy
+
+    # -- export ----------------------------------------------------------------------------------
+
+    def _export(self, client: viser.ClientHandle) -> None:
+        """Send what is shown to the browser as one self-contained HTML file."""
+        name = f"{self.name.value.strip() or 'regrasp'}.html"
+        client.send_file_download(name, scene_html(self.wb.server).encode(), save_immediately=True)

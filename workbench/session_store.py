@@ -1,0 +1,76 @@
+"""The saved sessions folder: listing it, saving a session into it (never overwriting unasked), free names."""
+from __future__ import annotations
+
+import copy
+import shutil
+import tempfile
+from pathlib import Path
+
+from planner.errors import RegraspError
+from planner.paths import PROJECT_ROOT
+from planner.session import MANIFEST, MESHES, Session
+
+SESSIONS_DIR = PROJECT_ROOT / "sessions"
+
+
+def list_sessions(folder: Path) -> list[str]:
+    """Names of the sub-folders of `folder` that hold a session."""
+    return sorted(p.name for p in folder.iterdir() if Session.exists(p)) if folder.is_dir() else []
+
+
+def scratch_folder() -> Path:
+    """A fresh temporary folder for a session run from the GUI before it is saved."""
+    return Path(tempfile.mkdtemp(prefix="regrasp-session-")) / "session"
+
+
+def scratch_copy(session: Session) -> Session:
+    """A copy of the session, every finished step included, in a scratch folder; it shares the session's scene."""
+    folder = scratch_folder()
+    _copy_files(session, folder)
+    return Session(folder, copy.deepcopy(session.manifest), session.scene)
+
+
+def free_name(folder: Path, base: str) -> str:
+    """`<base>-rerun-N` with the smallest N not taken in `folder`."""
+    n = 1
+    while (folder / f"{base}-rerun-{n}").exists():
+        n += 1
+    return f"{base}-rerun-{n}"
+
+
+def check_name(name: str) -> str:
+    """A session name: one plain folder name."""
+    name = name.strip()
+    if not name or name.startswith(".") or Path(name).name != name:
+        raise RegraspError(f"'{name}' is not a session name: use one folder name (letters, digits, - and _)")
+    return name
+
+
+def save_copy(session: Session, target: Path, overwrite: bool = False) -> Session:
+    """Copy the session's files into `target`; an existing folder is replaced only with `overwrite`, and only if it holds a session."""
+    if target.exists():
+        if target.resolve() == session.folder.resolve():
+            return session
+        if not overwrite:
+            raise RegraspError(f"{target} already exists: confirm to overwrite it, or choose another name")
+        if not Session.exists(target):
+            raise RegraspError(f"{target} exists and holds no session: choose another name")
+    _copy_files(session, target)
+    return Session.open(target)
+
+
+def _copy_files(session: Session, target: Path) -> None:
+    """Copy the session's own files into a staging folder, then swap it in for `target`."""
+    staging = target.with_name(f".{target.name}.saving")
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir(parents=True)
+    for name in [MESHES, *(f for r in session.records for f in r["files"]), MANIFEST]:
+        shutil.copy2(session.folder / name, staging / name)
+    if target.exists():
+        old = target.with_name(f".{target.name}.old")
+        shutil.rmtree(old, ignore_errors=True)
+        target.rename(old)
+        staging.rename(target)
+        shutil.rmtree(old)
+    else:
+        staging.rename(target)
