@@ -31,7 +31,7 @@ def _is_array(f: dataclasses.Field) -> bool:
     return "dtype" in f.metadata
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
+def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write to a temporary file in the same folder, then rename: a crash never leaves half a file."""
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     with open(tmp, "wb") as f:
@@ -42,7 +42,7 @@ def _atomic_write(path: Path, data: bytes) -> None:
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    _atomic_write(path, text.encode())
+    atomic_write_bytes(path, text.encode())
 
 
 def save_result(result: Any, folder: Path, stem: str) -> list[str]:
@@ -56,7 +56,7 @@ def save_result(result: Any, folder: Path, stem: str) -> list[str]:
             rest[f.name] = value
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    _atomic_write(folder / f"{stem}.npz", buf.getvalue())
+    atomic_write_bytes(folder / f"{stem}.npz", buf.getvalue())
     atomic_write_text(folder / f"{stem}.json", json.dumps(rest, indent=1, default=_json_default))
     return [f"{stem}.npz", f"{stem}.json"]
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .paths import cache_dir
-from .results import _atomic_write
+from .results import atomic_write_bytes
 
 
 def cache_key(*parts: str | bytes) -> str:
@@ -32,7 +32,7 @@ def save_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write arrays to an .npz atomically (two processes may fill the cache at once)."""
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    _atomic_write(path, buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue())
 
 
 def load_arrays(path: Path) -> dict[str, np.ndarray] | None:

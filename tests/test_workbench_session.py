@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page, sync_playwright
+from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
 from test_workbench_browser import (CHANGED, CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _free_port, _settled, _until_changed,
                                     _view, _wait_for)
 
@@ -153,8 +154,15 @@ def test_save_never_overwrites_without_confirmation(workbench: Workbench, page: 
     (target / "notes.txt").write_text("keep me")
     before = _files(target)
     workbench.session_panel.name.value = "taken"
-    page.get_by_role("button", name="Save", exact=True).click()
-    page.get_by_text("Overwrite sessions/taken?").wait_for(timeout=10_000)
+    dialog = page.get_by_text("Overwrite sessions/taken?")
+    for _ in range(3):  # a click that lands while the panel re-renders (an earlier test's update) can be lost
+        page.get_by_role("button", name="Save", exact=True).click()
+        try:
+            dialog.wait_for(timeout=10_000)
+            break
+        except PlaywrightTimeoutError:
+            continue
+    assert dialog.is_visible(), workbench.session_panel.message.content
     page.get_by_role("button", name="Cancel").click()
     time.sleep(0.5)
     assert _files(target) == before
