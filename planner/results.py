@@ -71,6 +71,17 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-able: declare it with results.array(...)")
 
 
+def read_json_object(path: Path) -> dict[str, Any]:
+    """A JSON file that must hold an object; anything else is an InputError naming the file."""
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(path, None, f"not valid JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise InputError(path, None, "expected a JSON object")
+    return data
+
+
 def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | None = None) -> R:
     """Read a result written by `save_result`, checking every field; errors name the file and field.
 
@@ -79,12 +90,7 @@ def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | No
     for p in (npz_path, json_path):
         if not p.is_file():
             raise InputError(p, None, "missing: the session lists this step as finished but its file is gone")
-    try:
-        rest = json.loads(json_path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(json_path, None, f"not valid JSON ({exc})") from exc
-    if not isinstance(rest, dict):
-        raise InputError(json_path, None, "expected a JSON object")
+    rest = read_json_object(json_path)
     try:
         with np.load(npz_path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}

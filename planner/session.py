@@ -24,7 +24,7 @@ from . import __version__
 from .errors import InputError, RegraspError
 from .paths import cache_dir
 from .pipeline import PIPELINE, step_named
-from .results import atomic_write_text, load_result, save_result
+from .results import atomic_write_text, load_result, read_json_object, save_result
 from .steps import Step
 from .task import Scene, scene_from_dict
 
@@ -149,12 +149,7 @@ class Session:
         path = folder / MANIFEST
         if not path.is_file():
             raise InputError(path, None, "no session here (session.json is missing)")
-        try:
-            manifest = json.loads(path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(path, None, f"not valid JSON ({exc})") from exc
-        if not isinstance(manifest, dict):
-            raise InputError(path, None, "expected a JSON object")
+        manifest = read_json_object(path)
         for key in ("format_version", "task", "robot_spec", "robot_spec_name", "seed", "versions", "steps"):
             if key not in manifest:
                 raise InputError(path, key, "missing field")
