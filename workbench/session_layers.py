@@ -45,5 +45,7 @@ class SessionLayers:
         self.root.visible = value
 
     def remove(self) -> None:
-        """Take every layer out of the scene."""
+        """Take every layer (its scene nodes and GUI) out of the workbench."""
+        for layer in self.layers.values():
+            layer.remove()
         self.root.remove()

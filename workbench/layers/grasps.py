@@ -1,0 +1,210 @@
+"""The `pick_grasps` / `place_grasps` steps drawn (paper IV-A, figs. 2-3): the object's point set coloured by
+kd-tree leaf at the object's placement, and a rank selector: the chosen grasp's hand (its collision shapes),
+contact points, normals, friction cones and scores; optionally the fingers' workspace sphere hierarchies."""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import trimesh
+import viser
+
+from planner.finger_workspace import hand_workspaces
+from planner.grasps import GraspList, GraspParams, hand_spec_of
+from planner.hand_model import HandModel, load_hand_model
+from planner.object_model import object_model
+from planner.task import Scene
+
+from ..meshes import coal_to_trimesh, matrix_wxyz
+from .base import StepLayer
+
+POINT_SIZE = 0.004  # m
+HAND_STYLE = ((200, 200, 210), 0.6)
+TIP_COLOR = (250, 200, 40)
+CONTACT_COLOR = (230, 30, 30)
+CONTACT_SIZE = 0.008  # m
+NORMAL_LENGTH = 0.04  # m
+CONE_HEIGHT = 0.02  # m
+CONE_STYLE = ((255, 120, 0), 0.35)
+SPHERE_OPACITY = 0.3
+FINGER_COLORS = ((40, 110, 240), (30, 170, 80), (170, 60, 200), (230, 90, 30), (0, 170, 170))
+
+_LIVE: dict[tuple[int, str], "GraspsLayer"] = {}  # (server, root) -> the layer drawing there: a redraw drops the old GUI
+_LIVE_LOCK = threading.Lock()
+
+
+def leaf_colors(leaves: np.ndarray) -> np.ndarray:
+    """(m, 3) uint8: a distinct-looking colour per kd-tree leaf (golden-ratio hues, fixed saturation and value)."""
+    hue = (leaves * 0.618033988749895) % 1.0
+    k = (np.array([5.0, 3.0, 1.0])[None] + hue[:, None] * 6.0) % 6.0
+    rgb = 0.9 - 0.9 * 0.75 * np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)
+    return (rgb * 255).astype(np.uint8)
+
+
+def friction_cones(points: np.ndarray, normals: np.ndarray, mu: float, height: float = CONE_HEIGHT) -> trimesh.Trimesh:
+    """One mesh of cones, apex at each contact, axis along the outward normal, half-angle atan(mu)."""
+    parts = []
+    for p, n in zip(points, normals):
+        cone = trimesh.creation.cone(radius=height * mu, height=height, sections=16)  # base at z=0, apex at z=h
+        flip = trimesh.transformations.rotation_matrix(np.pi, (1, 0, 0))
+        flip[2, 3] = height  # apex to the origin, base at z=h
+        T = trimesh.geometry.align_vectors((0, 0, 1), n)
+        T[:3, 3] = p
+        cone.apply_transform(T @ flip)
+        parts.append(cone)
+    return trimesh.util.concatenate(parts)
+
+
+def spheres_mesh(centres: np.ndarray, radii: np.ndarray) -> trimesh.Trimesh:
+    """One mesh of spheres."""
+    return trimesh.util.concatenate([trimesh.creation.icosphere(subdivisions=1, radius=r).apply_translation(c)
+                                     for c, r in zip(centres, radii)])
+
+
+class GraspsLayer(StepLayer):
+    """A grasp list on its object; which placement the object is drawn at is the subclass's `placement`."""
+
+    placement = "initial"  # or "final": the scene's object pose the list is drawn at
+    title = "Grasps"
+
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str):
+        super().__init__(server, scene, root)
+        self.folder: viser.GuiFolderHandle | None = None
+        self.rank: viser.GuiDropdownHandle | None = None
+        self.show_spheres: viser.GuiCheckboxHandle | None = None
+        self.scores: viser.GuiMarkdownHandle | None = None
+        self.result: GraspList | None = None
+        self.hand_model: HandModel | None = None
+        self.hand_frame: viser.FrameHandle | None = None
+        self.shown_rank: int | None = None
+        self._shape_handles: list[viser.MeshHandle] = []
+        self._sphere_handles: list[viser.MeshHandle] = []
+        with _LIVE_LOCK:
+            old = _LIVE.get((id(server), root))
+            _LIVE[(id(server), root)] = self
+        if old is not None:  # the layer this one replaces (its scene nodes went with the old root): drop its GUI
+            old._remove_gui()
+
+    def update(self, result: GraspList) -> None:
+        self._remove_gui()
+        self.result = result
+        scene = self.scene
+        T = scene.object_initial if self.placement == "initial" else scene.object_final
+        wxyz, xyz = matrix_wxyz(np.asarray(T, float))
+        obj_node = f"{self.name}/object"
+        self.server.scene.add_frame(obj_node, show_axes=False, wxyz=wxyz, position=xyz)
+        hand = load_hand_model(hand_spec_of(scene.robot.spec, result.hand))
+        self.hand_model = hand
+        model = object_model(scene.object_mesh, GraspParams().point_step * min(result.tip_radius))
+        self.server.scene.add_point_cloud(f"{obj_node}/points", model.points.astype(np.float32), leaf_colors(model.leaf_ids()),
+                                          point_size=POINT_SIZE, point_shape="circle", precision="float32")
+        self.hand_frame = self.server.scene.add_frame(f"{obj_node}/hand", show_axes=False, visible=False)
+        self._shape_handles = []
+        for i, (shape, pose) in enumerate(hand.shape_poses(hand.open_q)):
+            mesh = coal_to_trimesh(shape.geometry)
+            color = TIP_COLOR if shape.is_tip else HAND_STYLE[0]
+            self._shape_handles.append(self.server.scene.add_mesh_simple(
+                f"{obj_node}/hand/shape_{i}", mesh.vertices, mesh.faces, color=color, opacity=HAND_STYLE[1],
+                flat_shading=True, cast_shadow=False, receive_shadow=False))
+        self._sphere_handles = []
+        for i, ws in enumerate(hand_workspaces(hand, GraspParams().workspace())):
+            if len(ws.radii) == 0:
+                continue
+            mesh = spheres_mesh(ws.centres, ws.radii)
+            self._sphere_handles.append(self.server.scene.add_mesh_simple(
+                f"{obj_node}/hand/spheres_{hand.finger_names[i]}", mesh.vertices, mesh.faces,
+                color=FINGER_COLORS[i % len(FINGER_COLORS)], opacity=SPHERE_OPACITY, cast_shadow=False, receive_shadow=False,
+                visible=False))
+        self._build_gui(result)
+        self.poses = {}
+        if len(result):
+            self.show(0)
+
+    def _build_gui(self, result: GraspList) -> None:
+        gui = self.server.gui
+        self.folder = gui.add_folder(f"{self.title}: {result.hand} hand", expand_by_default=False)
+        with self.folder:
+            if len(result):
+                labels = self.rank_labels(result)
+                self.rank = gui.add_dropdown("Rank", labels, initial_value=labels[0], hint="Grasps best first: pick one to see it")
+                self.rank.on_update(lambda _: self.show(self.rank_of(self.rank.value)))
+            self.show_spheres = gui.add_checkbox("Finger sphere hierarchies", False)
+            self.show_spheres.on_update(lambda _: self._set_spheres_visible(self.show_spheres.value))
+            self.scores = gui.add_markdown(self.summary(result))
+
+    @staticmethod
+    def rank_labels(result: GraspList) -> tuple[str, ...]:
+        return tuple(f"{r + 1}: ε={result.epsilon[r]:.4f} quality={result.quality[r]:.3f}" for r in range(len(result)))
+
+    @staticmethod
+    def rank_of(label: str) -> int:
+        return int(label.split(":", 1)[0]) - 1
+
+    @staticmethod
+    def summary(result: GraspList) -> str:
+        return (f"{len(result)} grasps kept of {result.frames_tried} frames tried, μ={result.mu:g}, "
+                f"{result.cone_edges} cone edges, {result.seconds:.1f} s")
+
+    def scores_text(self, rank: int) -> str:
+        r = self.result
+        assert r is not None
+        rows = "\n".join(f"| {s} | {float(getattr(r, s)[rank]):.4f} |" for s in r.SCORES)
+        fingers = ", ".join(c["finger"] for c in r.contacts(rank))
+        return f"**Rank {rank + 1}** of {len(r)} — contacts: {fingers}\n\n| score | value |\n|---|---|\n{rows}\n\n{self.summary(r)}"
+
+    def _set_spheres_visible(self, visible: bool) -> None:
+        for h in self._sphere_handles:
+            h.visible = visible
+
+    def show(self, rank: int) -> None:
+        """Draw the grasp at `rank` (0 = best): the hand at its pose and configuration, its contacts, normals and cones."""
+        r, hand = self.result, self.hand_model
+        assert r is not None and hand is not None and self.hand_frame is not None
+        obj_node = f"{self.name}/object"
+        with self.server.atomic():
+            wxyz, xyz = matrix_wxyz(r.hand_pose[rank])
+            self.hand_frame.wxyz, self.hand_frame.position = wxyz, xyz
+            self.hand_frame.visible = True
+            for handle, (_, pose) in zip(self._shape_handles, hand.shape_poses(r.finger_q[rank])):
+                handle.wxyz, handle.position = matrix_wxyz(pose)
+            mask = r.contact_mask[rank]
+            points, normals = r.contact_point[rank][mask], r.contact_normal[rank][mask]
+            if len(points):
+                self.server.scene.add_point_cloud(f"{obj_node}/contacts", points.astype(np.float32), CONTACT_COLOR,
+                                                  point_size=CONTACT_SIZE, point_shape="circle", precision="float32")
+                segments = np.stack([points, points + NORMAL_LENGTH * normals], axis=1)
+                self.server.scene.add_line_segments(f"{obj_node}/normals", segments, CONTACT_COLOR, thickness=0.002)
+                cones = friction_cones(points, normals, r.mu)
+                self.server.scene.add_mesh_simple(f"{obj_node}/cones", cones.vertices, cones.faces, color=CONE_STYLE[0],
+                                                  opacity=CONE_STYLE[1], cast_shadow=False, receive_shadow=False)
+        self.shown_rank = rank
+        if self.scores is not None:
+            self.scores.content = self.scores_text(rank)
+        if self.rank is not None and self.rank_of(self.rank.value) != rank:
+            self.rank.value = self.rank_labels(r)[rank]
+
+    def _remove_gui(self) -> None:
+        if self.folder is not None:
+            self.folder.remove()
+        self.folder = self.rank = self.show_spheres = self.scores = None
+
+    def remove(self) -> None:
+        self._remove_gui()
+        with _LIVE_LOCK:
+            if _LIVE.get((id(self.server), self.name)) is self:
+                del _LIVE[(id(self.server), self.name)]
+        super().remove()
+
+
+class PickGraspsLayer(GraspsLayer):
+    """The picking hand's list, on the object at its initial placement."""
+
+    placement = "initial"
+    title = "Pick grasps"
+
+
+class PlaceGraspsLayer(GraspsLayer):
+    """The placing hand's list, on the object at its final placement."""
+
+    placement = "final"
+    title = "Place grasps"
