@@ -138,7 +138,7 @@ class Workbench:
         if self.session_layers is not None:
             self.session_layers.remove()
         self.session = session
-        self.session_layers = SessionLayers(self.server, session) if session is not None else None
+        self.session_layers = SessionLayers(self.server, session, workbench=self) if session is not None else None
         if self.session_layers is not None:
             self.session_layers.visible = self.show_steps.value
         self.session_panel.shown(session, self.session_layers)

@@ -1,6 +1,8 @@
 """Every finished step of a session drawn by its layer, from the saved results (nothing is recomputed)."""
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import viser
 
@@ -17,13 +19,13 @@ class SessionLayers:
 
     A layer that fails to draw is dropped and its error kept in `errors`, so one bad layer never hides the rest."""
 
-    def __init__(self, server: viser.ViserServer, session: Session, root: str = ROOT):
+    def __init__(self, server: viser.ViserServer, session: Session, root: str = ROOT, workbench: Any = None):
         self.root = server.scene.add_frame(root, show_axes=False)
         self.layers: dict[str, StepLayer] = {}
         self.errors: dict[str, str] = {}
         for name in session.finished():
             if name in LAYERS:
-                layer = LAYERS[name](server, session.scene, f"{root}/{name}")
+                layer = LAYERS[name](server, session.scene, f"{root}/{name}", workbench)
                 try:
                     layer.update(session.result(name))
                 except Exception as exc:  # a drawing bug must not take the replay down

@@ -12,9 +12,10 @@ from planner.task import Scene
 class StepLayer:
     """Draws one step's result; `update(result)` (re)draws it and fills `poses`: robot configurations worth showing, by label."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None):
         self.server = server
         self.scene = scene
+        self.workbench = workbench  # the live Workbench whose robot a layer may pose; None in an HTML export
         self.name = root
         self.root = server.scene.add_frame(root, show_axes=False)
         self.poses: dict[str, np.ndarray] = {}

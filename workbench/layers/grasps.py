@@ -3,6 +3,8 @@ kd-tree leaf at the object's placement, and a rank selector: the chosen grasp's 
 contact points, normals, friction cones and scores; optionally the fingers' workspace sphere hierarchies."""
 from __future__ import annotations
 
+from typing import Any
+
 import threading
 
 import numpy as np
@@ -67,8 +69,8 @@ class GraspsLayer(StepLayer):
     placement = "initial"  # or "final": the scene's object pose the list is drawn at
     title = "Grasps"
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str):
-        super().__init__(server, scene, root)
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None):
+        super().__init__(server, scene, root, workbench)
         self.folder: viser.GuiFolderHandle | None = None
         self.rank: viser.GuiDropdownHandle | None = None
         self.show_spheres: viser.GuiCheckboxHandle | None = None

@@ -1,0 +1,107 @@
+"""The roadmap layer in a real browser: the Super Graph is drawn, a picked node poses the robot, a query animates its path."""
+from __future__ import annotations
+
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from playwright.sync_api import Page, sync_playwright
+from test_workbench_browser import (CHANGED, CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _changed, _free_port, _settled,
+                                    _until_changed, _view, _wait_for)
+
+from planner.paths import PROJECT_ROOT
+from planner.roadmap.build import wrist_positions
+from workbench.app import Workbench
+from workbench.layers.roadmap import JOINT_STEP, RoadmapLayer
+
+EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
+pytestmark = pytest.mark.browser
+
+
+@pytest.fixture(scope="module")
+def workbench(tmp_path_factory) -> Iterator[Workbench]:
+    folder = tmp_path_factory.mktemp("sessions") / "example"
+    shutil.copytree(EXAMPLE, folder)
+    wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=folder.parent)
+    yield wb
+    wb.close()
+
+
+@pytest.fixture(scope="module")
+def page(workbench: Workbench) -> Iterator[Page]:
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium is not installed at /usr/bin/chromium (apt-get install chromium)")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        page = browser.new_page(viewport=VIEWPORT)
+        page.goto(workbench.url)
+        page.get_by_text("Collisions:").wait_for(timeout=60_000)
+        yield page
+        browser.close()
+
+
+@pytest.fixture(scope="module")
+def layer(workbench: Workbench) -> RoadmapLayer:
+    assert workbench.session_layers is not None and not workbench.session_layers.errors
+    layer = workbench.session_layers.layers["roadmap"]
+    assert isinstance(layer, RoadmapLayer)
+    return layer
+
+
+def _node_in_largest(layer: RoadmapLayer) -> int:
+    """The node of the largest component whose wrists are farthest from the initial configuration's: clearly visible."""
+    roadmap = layer.roadmap
+    comp = roadmap.node_component
+    nodes = np.flatnonzero(comp == np.argmax(np.bincount(comp)))
+    initial = wrist_positions(layer.scene.robot, layer.scene.q_initial[None])[0]
+    return int(nodes[np.argmax(np.linalg.norm(roadmap.wrists[nodes] - initial, axis=2).sum(axis=1))])
+
+
+def test_super_graph_is_drawn(workbench: Workbench, page: Page, layer: RoadmapLayer) -> None:
+    page.get_by_text("Super Graph:").wait_for(timeout=10_000)
+    shown = _settled(page)
+    layer.visible = False
+    try:
+        assert _until_changed(page, shown) > CHANGED, "hiding the Super Graph changed nothing on screen"
+    finally:
+        layer.visible = True
+    _until_changed(page, _view(page))
+
+
+def test_picked_node_poses_the_robot(workbench: Workbench, page: Page, layer: RoadmapLayer) -> None:
+    i = _node_in_largest(layer)
+    before = _settled(page)
+    layer.node.value = i
+    try:
+        assert _wait_for(lambda: np.allclose(workbench.q, layer.roadmap.node_q[i]))
+        assert _until_changed(page, before) > CHANGED, "posing the robot at a node changed nothing on screen"
+    finally:
+        workbench.reset()
+
+
+def test_query_animates_the_path_to_a_node(workbench: Workbench, page: Page, layer: RoadmapLayer,
+                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    workbench.reset()
+    i = _node_in_largest(layer)
+    layer.node.value = i  # the robot goes to the node: bring it back, then plan there
+    workbench.reset()
+    before = _settled(page)
+    posed: list[np.ndarray] = []
+    pose = workbench.pose_robot
+    monkeypatch.setattr(workbench, "pose_robot", lambda q: (posed.append(np.array(q)), pose(q)))
+    page.get_by_role("button", name="Plan to node").click()
+    assert _wait_for(lambda: "Animating" in layer.status.content or "No path" in layer.status.content, 120), layer.status.content
+    assert "Path found" in layer.status.content, layer.status.content
+    assert layer.last_query is not None and layer.last_query.found
+    path = layer.last_query.path
+    assert np.allclose(path[0], workbench.scene.q_initial) and np.allclose(path[-1], layer.roadmap.node_q[i])
+    assert layer.job is not None
+    layer.job.join(120)
+    assert "Robot at node" in layer.status.content, layer.status.content
+    assert np.allclose(workbench.q, layer.roadmap.node_q[i]), "the animation did not end at the node"
+    assert len(posed) > len(path), "the path was not animated frame by frame"
+    steps = np.abs(np.diff(np.array(posed), axis=0)).max(axis=1)
+    assert steps.max() <= JOINT_STEP + 1e-9, "the animation jumps"
+    assert _changed(_settled(page), before) > CHANGED, "the robot at the end of the path looks as at the start"

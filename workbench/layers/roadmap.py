@@ -1,0 +1,238 @@
+"""The `roadmap` step drawn: the Super Graph in wrist space, node picking and a query tool that animates its path.
+
+Each Super Graph edge is drawn once per wrist, from the wrist's position at one node to its position
+at the other (all segments in one `add_line_segments` call: viser is slow to show thousands of
+separate nodes). A wrist has its arm's colour; the largest components get shades of it, the small
+ones are grey, invalid edges dark. The "Roadmap" GUI folder picks a node (the robot goes there) and
+plans from the workbench's current configuration to it, in a background thread, then animates.
+"""
+from __future__ import annotations
+
+import colorsys
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import viser
+
+from planner.roadmap.build import wrist_positions
+from planner.roadmap.query import QueryResult, RoadmapPlanner
+from planner.roadmap.result import Roadmap, RoadmapParams
+from planner.task import Scene
+
+from ..notify import error_text
+from .arms import ARM_COLORS
+from .base import StepLayer
+
+SHADES = (1.0, 0.55, 1.45, 0.8)  # brightness of the wrist's colour for the 1st, 2nd, ... largest component
+SMALL_COLOR = (150, 150, 150)  # components beyond SHADES
+INVALID_COLOR = (60, 60, 60)  # edges marked invalid
+LINE_THICKNESS = 0.002  # m
+ARM_COLOR_NAMES = ("blue", "orange", "green", "purple")  # of ARM_COLORS
+MARK_RADIUS = 0.025  # m: the chosen node's wrists
+MARK_COLOR = (250, 20, 160)
+FPS = 30.0
+WRIST_STEP = 0.03  # m: the largest wrist move between two animation frames ...
+JOINT_STEP = 0.05  # rad: ... and the largest joint move (for the torso, which moves the wrists little but the body a lot)
+
+_FOLDERS: dict[int, viser.GuiFolderHandle] = {}  # id(server) -> the one Roadmap folder shown on that server
+
+
+def _shade(color: tuple[int, int, int], factor: float) -> tuple[int, int, int]:
+    h, l, s = colorsys.rgb_to_hls(*(c / 255 for c in color))
+    r, g, b = colorsys.hls_to_rgb(h, min(1.0, l * factor), s)
+    return int(r * 255), int(g * 255), int(b * 255)
+
+
+def edge_colors(roadmap: Roadmap) -> np.ndarray:
+    """(edges, wrists, 3) uint8: each wrist's colour shaded by its edge's component rank; grey for small ones, dark if invalid."""
+    comp = roadmap.node_component
+    sizes = np.bincount(comp)
+    rank = np.empty_like(sizes)
+    rank[np.argsort(-sizes, kind="stable")] = np.arange(len(sizes))
+    edge_rank = rank[comp[roadmap.edges[:, 0]]] if len(roadmap.edges) else np.zeros(0, dtype=int)
+    wrists = roadmap.wrists.shape[1]
+    out = np.empty((len(roadmap.edges), wrists, 3), dtype=np.uint8)
+    for w in range(wrists):
+        palette = np.array([_shade(ARM_COLORS[w % len(ARM_COLORS)], f) for f in SHADES] + [SMALL_COLOR], dtype=np.uint8)
+        out[:, w] = palette[np.minimum(edge_rank, len(SHADES))]
+    out[~roadmap.edge_valid] = INVALID_COLOR
+    return out
+
+
+def frames(robot, path: np.ndarray) -> np.ndarray:
+    """The path resampled for animation: straight joint-space lines, at most WRIST_STEP of wrist and JOINT_STEP of joint motion a frame."""
+    if len(path) < 2:
+        return path
+    w = wrist_positions(robot, path)
+    out = [path[:1]]
+    for k in range(len(path) - 1):
+        n = int(max(1, np.ceil(np.linalg.norm(w[k + 1] - w[k], axis=1).max() / WRIST_STEP),
+                    np.ceil(np.abs(path[k + 1] - path[k]).max() / JOINT_STEP)))
+        t = np.linspace(0.0, 1.0, n + 1)[1:, None]
+        out.append(path[k] + t * (path[k + 1] - path[k]))
+    return np.concatenate(out)
+
+
+class RoadmapLayer(StepLayer):
+    """The Super Graph in wrist space, a chosen node, and planning to it from the robot's current configuration."""
+
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None):
+        super().__init__(server, scene, root, workbench)
+        self.roadmap: Roadmap | None = None
+        self.last_query: QueryResult | None = None
+        self.job: threading.Thread | None = None
+        self._planner: RoadmapPlanner | None = None
+        self._plan_lock = threading.Lock()
+        self._animation = 0  # bumped to stop a running animation
+        self.folder: viser.GuiFolderHandle | None = None
+
+    # -- drawing ---------------------------------------------------------------------------------
+
+    def update(self, result: Roadmap) -> None:
+        self.roadmap, self._planner, self.last_query = result, None, None
+        stats = result.stats()
+        if len(result.edges):
+            points = result.wrists[result.edges].transpose(0, 2, 1, 3)  # (edges, wrists, 2 ends, 3)
+            colors = np.repeat(edge_colors(result)[:, :, None], 2, axis=2)
+            self.server.scene.add_line_segments(f"{self.name}/edges", points.reshape(-1, 2, 3).astype(np.float32),
+                                                colors.reshape(-1, 2, 3), thickness=LINE_THICKNESS)
+        self._build_gui(stats)
+        largest = int(np.argmax(np.bincount(result.node_component))) if len(result.node_q) else 0
+        self.poses = {}
+        if len(result.node_q):
+            first = int(np.flatnonzero(result.node_component == largest)[0])
+            self.poses = {f"roadmap: node {first} (largest component)": result.node_q[first]}
+            self.mark(first)
+
+    def _build_gui(self, stats: dict) -> None:
+        old = _FOLDERS.pop(id(self.server), None)
+        if old is not None:  # the previous session's layer (SessionLayers removes only the scene nodes)
+            old.remove()
+        gui = self.server.gui
+        n = max(1, stats["nodes"])
+        with gui.add_folder("Roadmap") as self.folder:
+            gui.add_markdown(f"Super Graph: **{stats['nodes']}** nodes, **{stats['edges']}** edges, "
+                             f"**{stats['components']}** components (largest {stats['largest_component']}); "
+                             + ", ".join(f"{a} wrist: {c}" for a, c in zip(self.roadmap.arms, ARM_COLOR_NAMES)))
+            self.node = gui.add_slider("Node", min=0, max=n - 1, step=1, initial_value=0,
+                                       hint="A Super Graph node: the robot goes there")
+            self.go_button = gui.add_button("Robot to node")
+            self.plan_button = gui.add_button("Plan to node", hint="Plan from the current configuration (hands at rest) and animate")
+            self.status = gui.add_markdown("")
+        _FOLDERS[id(self.server)] = self.folder
+        self.node.on_update(lambda e: self.pick(int(e.target.value)))
+        self.go_button.on_click(lambda _: self.pick(int(self.node.value)))
+        self.plan_button.on_click(lambda _: self.plan_to(int(self.node.value)))
+
+    def mark(self, i: int) -> None:
+        """Mark node i: a sphere at each of its wrists and a label."""
+        assert self.roadmap is not None
+        for w, p in enumerate(self.roadmap.wrists[i]):
+            self.server.scene.add_icosphere(f"{self.name}/mark/w{w}", radius=MARK_RADIUS, color=MARK_COLOR, position=p,
+                                            cast_shadow=False, receive_shadow=False)
+        top = self.roadmap.wrists[i].mean(axis=0) + (0.0, 0.0, 0.15)
+        self.server.scene.add_label(f"{self.name}/mark/label", f"node {i} (component {int(self.roadmap.node_component[i])})",
+                                    position=top, anchor="bottom-center")
+
+    # -- the workbench's robot -------------------------------------------------------------------
+
+    def _wb(self) -> Any:
+        return self.workbench
+
+    def _stale(self) -> bool:
+        """True when the workbench no longer shows this layer (another session was drawn): the folder goes."""
+        wb = self._wb()
+        layers = getattr(wb, "session_layers", None)
+        if layers is not None and layers.layers.get("roadmap") is not self:
+            self.remove_gui()
+            return True
+        return False
+
+    def _say(self, text: str) -> None:
+        if self.folder is not None:
+            self.status.content = text
+
+    def pick(self, i: int) -> None:
+        """Mark node i and put the robot there."""
+        if self.roadmap is None or not 0 <= i < len(self.roadmap.node_q):
+            return
+        self._animation += 1
+        self.mark(i)
+        wb = self._wb()
+        if wb is None or self._stale():
+            return
+        wb.pose_robot(self.roadmap.node_q[i])
+        self._say(f"Robot at node {i} (component {int(self.roadmap.node_component[i])}).")
+
+    def plan_to(self, i: int) -> threading.Thread | None:
+        """In the background: plan from the workbench's configuration (hands at rest) to node i, then animate the path."""
+        wb = self._wb()
+        if self.roadmap is None or wb is None or self._stale():
+            return None
+        if self.job is not None and self.job.is_alive():
+            self._say("*Already planning: wait for the current query.*")
+            return None
+        self._animation += 1
+        self.mark(i)
+        self.job = threading.Thread(target=self._plan, args=(wb, i, np.array(wb.q, dtype=float), self._animation), daemon=True)
+        self.job.start()
+        return self.job
+
+    def _plan(self, wb: Any, i: int, q: np.ndarray, animation: int) -> None:
+        roadmap = self.roadmap
+        assert roadmap is not None
+        try:
+            with self._plan_lock:
+                if self._planner is None:
+                    self._say("*Building the roadmap's collision model…*")
+                    res = roadmap.resolution
+                    params = RoadmapParams(env_padding=res.get("env_padding_m", RoadmapParams.env_padding),
+                                           self_padding=res.get("self_padding_m", RoadmapParams.self_padding),
+                                           env_clearance=res.get("env_clearance_m", RoadmapParams.env_clearance))
+                    self._planner = RoadmapPlanner(self.scene, roadmap, params)
+                planner = self._planner
+                held = np.setdiff1d(np.arange(len(q)), planner.dec.transit)
+                moved = not np.allclose(q[held], planner.dec.q_hold[held])
+                q[held] = planner.dec.q_hold[held]
+                self._say(f"*Planning to node {i}…*")
+                t0 = time.monotonic()
+                result = planner.query(q, roadmap.node_q[i])
+        except Exception as exc:  # shown, never raised into viser's thread
+            self._say(f"<span style='color:#d22'>**Query failed:** {error_text(exc)}</span>")
+            return
+        self.last_query = result
+        note = " (hands put at rest first)" if moved else ""
+        if not result.found:
+            self._say(f"<span style='color:#d22'>**No path** to node {i}{note}: {result.message}</span>")
+            return
+        self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, {len(result.nodes)} graph nodes, "
+                  f"length {result.length:.2f} rad, {result.checks} checks, {time.monotonic() - t0:.1f} s. *Animating…*")
+        self._animate(wb, frames(self.scene.robot, result.path), animation)
+        if animation == self._animation:
+            self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, {len(result.nodes)} graph nodes, "
+                      f"length {result.length:.2f} rad, {result.checks} checks. Robot at node {i}.")
+
+    def _animate(self, wb: Any, qs: np.ndarray, animation: int) -> None:
+        """Pose the robot at each of qs, at most FPS a second (slower when drawing is); stops when another action starts."""
+        start = time.monotonic()
+        for k, q in enumerate(qs):
+            if animation != self._animation:
+                return
+            time.sleep(max(0.0, start + k / FPS - time.monotonic()))
+            wb.pose_robot(q)
+
+    # -- removal ---------------------------------------------------------------------------------
+
+    def remove_gui(self) -> None:
+        self._animation += 1
+        if self.folder is not None:
+            if _FOLDERS.get(id(self.server)) is self.folder:
+                del _FOLDERS[id(self.server)]
+            self.folder.remove()
+            self.folder = None
+
+    def remove(self) -> None:
+        self.remove_gui()
+        super().remove()
