@@ -34,12 +34,11 @@ def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
     return palm.actInv(np.mean(tips, axis=0))
 
 
-def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, iterations: int = 150,
-                   tol: float = 1e-3) -> np.ndarray:
-    """Damped least squares on torso + arm joints moving the grasp centre to `target` from q0."""
+def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, offset: np.ndarray,
+                   iterations: int = 150, tol: float = 1e-3) -> np.ndarray:
+    """Damped least squares on torso + arm joints moving the point `offset` of the palm frame to `target` from q0."""
     hand = robot.spec.arm(arm).hand
     fid = robot.frame_id(hand.prefixed(hand.palm_frame))
-    offset = grasp_centre(robot, arm)
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
     data = robot.model.createData()
     q = q0.copy()
@@ -69,7 +68,7 @@ def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray,
         q0 = robot.q_rest.copy()
         if s:
             q0[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
-        q = solve_position(robot, arm, target, q0)
+        q = solve_position(robot, arm, target, q0, offset)
         centre = pin.SE3(robot.frame_placement(q, hand.prefixed(hand.palm_frame), data)).act(offset)
         d = float(np.linalg.norm(centre - target))
         best = min(best, d)

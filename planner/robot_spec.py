@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 
 from .paths import ASSETS, robot_data_file
 from .tomlread import Table, load_toml
@@ -185,7 +184,3 @@ def rest_configuration_of(spec: RobotSpec) -> dict[str, float]:
         for finger in arm.hand.fingers:
             out.update(zip((arm.hand.prefixed(j) for j in finger.joints), finger.open))
     return out
-
-
-def as_array(values: tuple[float, ...]) -> np.ndarray:
-    return np.asarray(values, dtype=float)

@@ -14,7 +14,6 @@ import numpy as np
 import trimesh
 
 from .environment import SHAPES, Environment, Obstacle
-from .errors import InputError
 from .geometry import pose
 from .object_mesh import load_object_mesh
 from .paths import ASSETS

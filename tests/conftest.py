@@ -21,3 +21,17 @@ def default_collision(default_scene):
     from planner.collision import build_collision_model
 
     return build_collision_model(default_scene.robot, default_scene.environment)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Headless Debian chromium driven by playwright (software WebGL); skipped only when chromium is absent."""
+    from playwright.sync_api import sync_playwright
+    from test_workbench_browser import CHROMIUM, CHROMIUM_ARGS
+
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium is not installed at /usr/bin/chromium (apt-get install chromium)")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()

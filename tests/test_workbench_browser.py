@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
-from playwright.sync_api import Page, sync_playwright
+from playwright.sync_api import Browser, Page
 
 from planner.paths import DEFAULT_TASK
 from workbench.app import Workbench
@@ -82,17 +82,13 @@ def workbench() -> Iterator[Workbench]:
 
 
 @pytest.fixture(scope="module")
-def page(workbench: Workbench) -> Iterator[Page]:
-    if not CHROMIUM.exists():
-        pytest.skip("Debian chromium is not installed at /usr/bin/chromium (apt-get install chromium)")
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        page = browser.new_page(viewport=VIEWPORT)
-        page.goto(workbench.url)
-        assert workbench.collision_ready.wait(60), "the collision model was never built"
-        page.get_by_text("Collisions:").wait_for(timeout=30_000)
-        yield page
-        browser.close()
+def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
+    page = browser.new_page(viewport=VIEWPORT)
+    page.goto(workbench.url)
+    assert workbench.collision_ready.wait(60), "the collision model was never built"
+    page.get_by_text("Collisions:").wait_for(timeout=30_000)
+    yield page
+    page.close()
 
 
 def test_robot_is_drawn(workbench: Workbench, page: Page) -> None:

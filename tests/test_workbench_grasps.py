@@ -3,13 +3,12 @@ and shows its scores; a list computed from the GUI ("Run up to this step") gets 
 from __future__ import annotations
 
 import shutil
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
-from playwright.sync_api import Browser, Page, sync_playwright
-from test_workbench_browser import CHANGED, CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _free_port, _settled, _until_changed, _wait_for
+from playwright.sync_api import Browser, Page
+from test_workbench_browser import CHANGED, VIEWPORT, _free_port, _settled, _until_changed, _wait_for
 
 from planner.paths import PROJECT_ROOT
 from planner.session import Session
@@ -20,16 +19,6 @@ from workbench.layers.grasps import GraspsLayer, friction_cones
 pytestmark = pytest.mark.browser
 
 EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    if not CHROMIUM.exists():
-        pytest.skip("Debian chromium is not installed at /usr/bin/chromium (apt-get install chromium)")
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield browser
-        browser.close()
 
 
 def _open(wb: Workbench, browser: Browser) -> Page:

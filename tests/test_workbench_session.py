@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from playwright.sync_api import Browser, Page, sync_playwright
-from test_workbench_browser import (CHANGED, CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _free_port, _settled, _until_changed,
+from playwright.sync_api import Browser, Page
+from test_workbench_browser import (CHANGED, VIEWPORT, _free_port, _settled, _until_changed,
                                     _view, _wait_for)
 
 from planner.errors import RegraspError
@@ -41,16 +41,6 @@ def _files(folder: Path) -> dict[str, bytes]:
 def example() -> Session:
     """The repo's example session (regenerate it with the command in README.md if this fails)."""
     return Session.open(EXAMPLE)
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    if not CHROMIUM.exists():
-        pytest.skip("Debian chromium is not installed at /usr/bin/chromium (apt-get install chromium)")
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield browser
-        browser.close()
 
 
 @pytest.fixture(scope="module")

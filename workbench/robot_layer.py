@@ -8,9 +8,10 @@ import viser
 from planner.robot import Robot
 
 from .meshes import coal_to_trimesh, poses_wxyz
+from .rooted import Rooted
 
 
-class RobotLayer:
+class RobotLayer(Rooted):
     """Owns the robot's mesh handles under `root`; `update(q)` poses them."""
 
     def __init__(self, server: viser.ViserServer, robot: Robot, q: np.ndarray, root: str = "/robot"):
@@ -19,7 +20,7 @@ class RobotLayer:
         self.geometry = robot.visual_model
         self.data = self.model.createData()
         self.geometry_data = pin.GeometryData(self.geometry)
-        self.root = server.scene.add_frame(root, show_axes=False)
+        super().__init__(server, root)
         self.handles: list[viser.MeshHandle] = []
         for obj in self.geometry.geometryObjects:
             mesh = coal_to_trimesh(obj.geometry, obj.meshScale)
@@ -28,14 +29,6 @@ class RobotLayer:
                 f"{root}/{obj.name}", mesh.vertices, mesh.faces, color=rgb, cast_shadow=False, receive_shadow=False))
         self.update(q)
 
-    @property
-    def visible(self) -> bool:
-        return self.root.visible
-
-    @visible.setter
-    def visible(self, value: bool) -> None:
-        self.root.visible = value
-
     def update(self, q: np.ndarray) -> None:
         """Pose every link at q in one atomic batch (viser sends only the poses that changed)."""
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data, np.asarray(q, float))
@@ -43,7 +36,3 @@ class RobotLayer:
         with self.server.atomic():
             for handle, w, p in zip(self.handles, wxyz, xyz):
                 handle.wxyz, handle.position = w, p
-
-    def remove(self) -> None:
-        """Take the robot out of the scene."""
-        self.root.remove()

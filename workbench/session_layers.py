@@ -10,17 +10,18 @@ from planner.session import Session
 
 from .layers import LAYERS, StepLayer
 from .notify import error_text
+from .rooted import Rooted
 
 ROOT = "/steps"
 
 
-class SessionLayers:
+class SessionLayers(Rooted):
     """Owns one layer per finished step that has one (see `layers.LAYERS`); other steps are only listed.
 
     A layer that fails to draw is dropped and its error kept in `errors`, so one bad layer never hides the rest."""
 
     def __init__(self, server: viser.ViserServer, session: Session, root: str = ROOT, workbench: Any = None):
-        self.root = server.scene.add_frame(root, show_axes=False)
+        super().__init__(server, root)
         self.layers: dict[str, StepLayer] = {}
         self.errors: dict[str, str] = {}
         for name in session.finished():
@@ -38,16 +39,8 @@ class SessionLayers:
         """The robot configurations every layer offers, by label, in pipeline order."""
         return {label: q for layer in self.layers.values() for label, q in layer.poses.items()}
 
-    @property
-    def visible(self) -> bool:
-        return self.root.visible
-
-    @visible.setter
-    def visible(self, value: bool) -> None:
-        self.root.visible = value
-
     def remove(self) -> None:
         """Take every layer (its scene nodes and GUI) out of the workbench."""
         for layer in self.layers.values():
             layer.remove()
-        self.root.remove()
+        super().remove()

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import threading
 
 import numpy as np
 import trimesh
@@ -30,9 +29,6 @@ CONE_HEIGHT = 0.02  # m
 CONE_STYLE = ((255, 120, 0), 0.35)
 SPHERE_OPACITY = 0.3
 FINGER_COLORS = ((40, 110, 240), (30, 170, 80), (170, 60, 200), (230, 90, 30), (0, 170, 170))
-
-_LIVE: dict[tuple[int, str], "GraspsLayer"] = {}  # (server, root) -> the layer drawing there: a redraw drops the old GUI
-_LIVE_LOCK = threading.Lock()
 
 
 def leaf_colors(leaves: np.ndarray) -> np.ndarray:
@@ -81,11 +77,6 @@ class GraspsLayer(StepLayer):
         self.shown_rank: int | None = None
         self._shape_handles: list[viser.MeshHandle] = []
         self._sphere_handles: list[viser.MeshHandle] = []
-        with _LIVE_LOCK:
-            old = _LIVE.get((id(server), root))
-            _LIVE[(id(server), root)] = self
-        if old is not None:  # the layer this one replaces (its scene nodes went with the old root): drop its GUI
-            old._remove_gui()
 
     def update(self, result: GraspList) -> None:
         self._remove_gui()
@@ -192,9 +183,6 @@ class GraspsLayer(StepLayer):
 
     def remove(self) -> None:
         self._remove_gui()
-        with _LIVE_LOCK:
-            if _LIVE.get((id(self.server), self.name)) is self:
-                del _LIVE[(id(self.server), self.name)]
         super().remove()
 
 

@@ -36,8 +36,6 @@ FPS = 30.0
 WRIST_STEP = 0.03  # m: the largest wrist move between two animation frames ...
 JOINT_STEP = 0.05  # rad: ... and the largest joint move (for the torso, which moves the wrists little but the body a lot)
 
-_FOLDERS: dict[int, viser.GuiFolderHandle] = {}  # id(server) -> the one Roadmap folder shown on that server
-
 
 def _shade(color: tuple[int, int, int], factor: float) -> tuple[int, int, int]:
     h, l, s = colorsys.rgb_to_hls(*(c / 255 for c in color))
@@ -107,9 +105,6 @@ class RoadmapLayer(StepLayer):
             self.mark(first)
 
     def _build_gui(self, stats: dict) -> None:
-        old = _FOLDERS.pop(id(self.server), None)
-        if old is not None:  # the previous session's layer (SessionLayers removes only the scene nodes)
-            old.remove()
         gui = self.server.gui
         n = max(1, stats["nodes"])
         with gui.add_folder("Roadmap") as self.folder:
@@ -121,7 +116,6 @@ class RoadmapLayer(StepLayer):
             self.go_button = gui.add_button("Robot to node")
             self.plan_button = gui.add_button("Plan to node", hint="Plan from the current configuration (hands at rest) and animate")
             self.status = gui.add_markdown("")
-        _FOLDERS[id(self.server)] = self.folder
         self.node.on_update(lambda e: self.pick(int(e.target.value)))
         self.go_button.on_click(lambda _: self.pick(int(self.node.value)))
         self.plan_button.on_click(lambda _: self.plan_to(int(self.node.value)))
@@ -138,18 +132,6 @@ class RoadmapLayer(StepLayer):
 
     # -- the workbench's robot -------------------------------------------------------------------
 
-    def _wb(self) -> Any:
-        return self.workbench
-
-    def _stale(self) -> bool:
-        """True when the workbench no longer shows this layer (another session was drawn): the folder goes."""
-        wb = self._wb()
-        layers = getattr(wb, "session_layers", None)
-        if layers is not None and layers.layers.get("roadmap") is not self:
-            self.remove_gui()
-            return True
-        return False
-
     def _say(self, text: str) -> None:
         if self.folder is not None:
             self.status.content = text
@@ -160,16 +142,16 @@ class RoadmapLayer(StepLayer):
             return
         self._animation += 1
         self.mark(i)
-        wb = self._wb()
-        if wb is None or self._stale():
+        wb = self.workbench
+        if wb is None:
             return
         wb.pose_robot(self.roadmap.node_q[i])
         self._say(f"Robot at node {i} (component {int(self.roadmap.node_component[i])}).")
 
     def plan_to(self, i: int) -> threading.Thread | None:
         """In the background: plan from the workbench's configuration (hands at rest) to node i, then animate the path."""
-        wb = self._wb()
-        if self.roadmap is None or wb is None or self._stale():
+        wb = self.workbench
+        if self.roadmap is None or wb is None:
             return None
         if self.job is not None and self.job.is_alive():
             self._say("*Already planning: wait for the current query.*")
@@ -228,8 +210,6 @@ class RoadmapLayer(StepLayer):
     def remove_gui(self) -> None:
         self._animation += 1
         if self.folder is not None:
-            if _FOLDERS.get(id(self.server)) is self.folder:
-                del _FOLDERS[id(self.server)]
             self.folder.remove()
             self.folder = None
 
