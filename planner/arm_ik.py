@@ -1,7 +1,8 @@
-"""Whole-arm inverse kinematics: put a hand's palm frame at a pose with the arm (and optionally the torso).
+"""Whole-arm inverse kinematics: put one or several hands' palm frames at poses with their arms (and the torso).
 
-Damped least squares on the 6-D pose error (log map of SE(3)), clipped to joint limits; cheap
-enough (~20 µs an iteration) to run from several starts per target.
+Damped least squares on the stacked 6-D pose errors (log map of SE(3)), with an active set at the
+joint limits; cheap enough (~20 µs an iteration per arm) to run from several starts per target.
+Two arms solved together share the torso, so neither undoes what the other needs.
 """
 from __future__ import annotations
 
@@ -16,8 +17,8 @@ from .robot import Robot
 @dataclass(frozen=True)
 class IKResult:
     q: np.ndarray
-    position_error: float  # m
-    rotation_error: float  # rad
+    position_error: float  # m, the worst over the frames
+    rotation_error: float  # rad, the worst over the frames
     iterations: int
 
     def within(self, position_tol: float, rotation_tol: float) -> bool:
@@ -25,41 +26,69 @@ class IKResult:
 
 
 class ArmIK:
-    """IK for one arm's palm frame; holds its own pinocchio Data (one per thread)."""
+    """IK for the palm frames of one arm or several (a name or a tuple); holds its own pinocchio Data (one per thread)."""
 
-    def __init__(self, robot: Robot, arm: str, with_torso: bool = True):
+    def __init__(self, robot: Robot, arms: str | tuple[str, ...], with_torso: bool = True):
+        arms = (arms,) if isinstance(arms, str) else tuple(arms)
         self.robot = robot
-        hand = robot.spec.arm(arm).hand
-        self.frame = robot.frame_id(hand.prefixed(hand.palm_frame))
-        self.idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]]) if with_torso else robot.arm_idx[arm]
+        self.frames = [robot.frame_id(robot.palm_frame(a)) for a in arms]
+        self.idx = np.concatenate(([robot.torso_idx] if with_torso else []) + [robot.arm_idx[a] for a in arms])
         self.data = robot.model.createData()
 
-    def palm(self, q: np.ndarray) -> pin.SE3:
+    def palm(self, q: np.ndarray, k: int = 0) -> pin.SE3:
+        """The k-th palm frame's world pose at q."""
         pin.framesForwardKinematics(self.robot.model, self.data, q)
-        return self.data.oMf[self.frame]
+        return self.data.oMf[self.frames[k]]
 
-    def solve(self, target: np.ndarray, q0: np.ndarray, iterations: int = 80, position_tol: float = 1e-3,
-              rotation_tol: float = 1e-2, damping: float = 1e-4) -> IKResult:
-        """Move the palm frame to the 4x4 world pose `target`, starting from q0 (other joints untouched)."""
+    def _errors(self, q: np.ndarray, goals: list[pin.SE3]) -> tuple[list[pin.SE3], np.ndarray, float, float]:
+        """Each goal seen from its palm frame, the stacked log errors, and the worst position and rotation errors
+        (the distance between origins is the relative translation's norm; the angle is the log's rotation part)."""
+        model, data = self.robot.model, self.data
+        pin.forwardKinematics(model, data, q)
+        relative = [pin.updateFramePlacement(model, data, f).actInv(g) for f, g in zip(self.frames, goals)]
+        err = np.concatenate([pin.log6(r).vector for r in relative])
+        position = max(float(np.linalg.norm(r.translation)) for r in relative)
+        rotation = float(np.max(np.linalg.norm(err.reshape(-1, 6)[:, 3:], axis=1)))
+        return relative, err, position, rotation
+
+    def solve(self, target: np.ndarray, q0: np.ndarray, iterations: int = 100, position_tol: float = 1e-3,
+              rotation_tol: float = 1e-2, damping: float = 1e-4, stall: int = 15) -> IKResult:
+        """Move the palm frame(s) to the world pose(s) `target` ((4, 4), or (k, 4, 4) in arm order), from q0.
+
+        Joints outside the arms (and torso) are untouched. Joints at a limit that the step would push
+        further are left out of that step (an active set), so one saturated joint does not stall the
+        others; gives up once the error has not dropped by 1 % over `stall` iterations (a local minimum:
+        another start is cheaper than more iterations).
+        """
         model, data, idx = self.robot.model, self.data, self.idx
         lo, hi = self.robot.lower[idx], self.robot.upper[idx]
-        goal = pin.SE3(target[:3, :3].copy(), target[:3, 3].copy())
+        targets = np.asarray(target, float).reshape(-1, 4, 4)
+        goals = [pin.SE3(T[:3, :3].copy(), T[:3, 3].copy()) for T in targets]
+        regulariser = damping * np.eye(6 * len(goals))
         q = q0.copy()
+        history: list[float] = []
         for it in range(iterations):
-            pin.forwardKinematics(model, data, q)
-            current = pin.updateFramePlacement(model, data, self.frame)
-            err = pin.log6(current.actInv(goal)).vector  # in the palm frame
-            pos_err = float(np.linalg.norm(goal.translation - current.translation))
-            rot_err = float(np.linalg.norm(err[3:]))
+            relative, err, pos_err, rot_err = self._errors(q, goals)
             if pos_err <= position_tol and rot_err <= rotation_tol:
                 return IKResult(q, pos_err, rot_err, it)
-            J = pin.computeFrameJacobian(model, data, q, self.frame, pin.LOCAL)[:, idx]
-            J = pin.Jlog6(current.actInv(goal)) @ J
-            dq = J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), err)
-            step = np.max(np.abs(dq))
-            if step > 0.4:
-                dq *= 0.4 / step
-            q[idx] = np.clip(q[idx] + dq, lo, hi)
-        current = self.palm(q)
-        return IKResult(q, float(np.linalg.norm(goal.translation - current.translation)),
-                        float(np.linalg.norm(pin.log3(current.rotation.T @ goal.rotation))), iterations)
+            history.append(float(np.linalg.norm(err)))
+            if len(history) > stall and history[-1] > 0.99 * history[-1 - stall]:
+                return IKResult(q, pos_err, rot_err, it)
+            J = np.vstack([pin.Jlog6(r) @ pin.computeFrameJacobian(model, data, q, f, pin.LOCAL)[:, idx]
+                           for r, f in zip(relative, self.frames)])
+            x = q[idx]
+            free = np.ones(len(idx), dtype=bool)
+            for _ in range(3):
+                Jf = J[:, free]
+                dq = np.zeros(len(idx))
+                dq[free] = Jf.T @ np.linalg.solve(Jf @ Jf.T + regulariser, err)
+                step = np.max(np.abs(dq))
+                if step > 0.4:
+                    dq *= 0.4 / step
+                blocked = free & (((x <= lo) & (dq < 0)) | ((x >= hi) & (dq > 0)))
+                if not blocked.any():
+                    break
+                free &= ~blocked
+            q[idx] = np.clip(x + dq, lo, hi)
+        _, _, pos_err, rot_err = self._errors(q, goals)
+        return IKResult(q, pos_err, rot_err, iterations)

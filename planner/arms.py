@@ -16,6 +16,8 @@ from .steps import Step, StepContext
 class ArmsParams:
     seeds: int = 32  # IK starts per arm and placement
     tolerance: float = 0.02  # m: grasp centre to the object's centre of mass
+    picking_arm: str = ""  # force the picking arm (with placing_arm); empty: the one arm that reaches the initial placement
+    placing_arm: str = ""
 
 
 @dataclass(frozen=True)
@@ -35,6 +37,12 @@ class ArmAssignment:
 def assign_arms(ctx: StepContext) -> ArmAssignment:
     scene, p = ctx.scene, ctx.params
     robot = scene.robot
+    forced = (p.picking_arm, p.placing_arm)
+    if any(forced):
+        names = robot.spec.arm_names
+        if not all(a in names for a in forced) or forced[0] == forced[1]:
+            raise RegraspError(f"arms: picking_arm and placing_arm must be two different arms of the robot ({', '.join(names)}); "
+                               f"got '{forced[0]}' and '{forced[1]}'")
     checker = build_collision_model(robot, scene.environment).checker()
     com = np.asarray(scene.object_mesh.center_mass)
     found, distances = {}, {}
@@ -46,6 +54,10 @@ def assign_arms(ctx: StepContext) -> ArmAssignment:
             ctx.progress((2 * i + j) / 4, f"{arm} arm to the {name} placement")
             results[arm] = reach(robot, checker, arm, target, ctx.rng, p.seeds, p.tolerance)
         distances[name] = {a: r.distance for a, r in results.items()}
+        chosen = p.picking_arm if name == "initial" else p.placing_arm
+        if chosen:
+            found[name] = results[chosen]  # the closest configuration is the witness even if the arm falls short
+            continue
         arms = [a for a, r in results.items() if r.reachable]
         if len(arms) != 1:
             raise RegraspError(f"the {name} placement must be reachable by exactly one arm; reached by: {', '.join(arms) or 'none'}")

@@ -49,11 +49,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from tqdm import tqdm
 
+    from .pipeline import step_named
     from .runner import run_pipeline
     from .session import Session
-    from .steps import parse_assignment
+    from .stages import stage_table
+    from .steps import StepFailed, parse_assignment
     from .task import load_task
 
     params: dict[str, dict] = {}
@@ -79,13 +83,25 @@ def _cmd_plan(args: argparse.Namespace) -> int:
                 bar.close()
         return report
 
-    ran = run_pipeline(session, args.until, params, progress)
+    failed = None
+    try:
+        ran = run_pipeline(session, args.until, params, progress)
+    except StepFailed as exc:
+        ran, failed = [r["name"] for r in session.records], exc
     print(f"{'step':<16}{'seconds':>9}  key figures")
     for record in session.records:
-        figures = ", ".join(f"{k}={v}" for k, v in record["stats"].items())
+        figures = ", ".join(f"{k}={v}" for k, v in record["stats"].items() if k != "failure")
         mark = "" if record["name"] in ran else "  (earlier run)"
         print(f"{record['name']:<16}{record['seconds']:>9.2f}  {figures}{mark}")
+    staged = [(r["name"], session.result(r["name"]).stages) for r in session.records
+              if "stages" in {f.name for f in dataclasses.fields(step_named(r["name"]).result)}]
+    if staged:
+        print()
+        print(stage_table(staged))
     print(f"session written to {out}")
+    if failed is not None:
+        print(f"error: {failed}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -204,7 +220,7 @@ def parser() -> argparse.ArgumentParser:
     pl.add_argument("task", help="task file, or a name in assets/tasks")
     pl.add_argument("--out", required=True, help="session folder to write")
     pl.add_argument("--seed", type=int, default=0)
-    pl.add_argument("--until", help="last step to run (default: all)")
+    pl.add_argument("--until", help="last step to run, e.g. double-grasps (default: all)")
     pl.add_argument("--resume", action="store_true", help="continue the session in --out where it stopped")
     pl.add_argument("--force", action="store_true", help="replace an existing session in --out")
     pl.add_argument("--set", action="append", metavar="STEP.PARAM=VALUE", help="a step parameter (repeatable)")

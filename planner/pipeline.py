@@ -1,14 +1,21 @@
 """The pipeline: every step, in order. A new step plugs in by adding its STEP here."""
 from __future__ import annotations
 
-from . import arms, grasps, roadmap
+from . import arms, double_grasps, exchange, grasp_configs, grasps, roadmap
 from .errors import RegraspError
 from .steps import Step
 
-PIPELINE: tuple[Step, ...] = (arms.STEP, grasps.PICK_STEP, grasps.PLACE_STEP, roadmap.STEP)
+PIPELINE: tuple[Step, ...] = (arms.STEP, grasps.PICK_STEP, grasps.PLACE_STEP, grasp_configs.STEP, exchange.STEP, double_grasps.STEP,
+                              roadmap.STEP)
+
+
+def canonical(name: str) -> str:
+    """Step names accept hyphens for underscores (`--until double-grasps`)."""
+    return name.replace("-", "_")
 
 
 def step_named(name: str) -> Step:
+    name = canonical(name)
     for step in PIPELINE:
         if step.name == name:
             return step
@@ -20,6 +27,7 @@ def steps_until(until: str | None) -> tuple[Step, ...]:
     if until is None:
         return PIPELINE
     names = [s.name for s in PIPELINE]
+    until = canonical(until)
     if until not in names:
         raise RegraspError(f"no step '{until}' (steps: {', '.join(names)})")
     return PIPELINE[: names.index(until) + 1]

@@ -21,7 +21,7 @@ class ReachResult:
     arm: str
     reachable: bool
     distance: float  # m: best distance of the grasp centre to the target over all seeds
-    q: np.ndarray | None  # a collision-free configuration achieving it, when reachable
+    q: np.ndarray  # when reachable a collision-free configuration achieving it, else the closest one found
 
 
 def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
@@ -29,7 +29,7 @@ def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
     hand = robot.spec.arm(arm).hand
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, robot.q_rest)
-    palm = data.oMf[robot.frame_id(hand.prefixed(hand.palm_frame))]
+    palm = data.oMf[robot.frame_id(robot.palm_frame(arm))]
     tips = [data.oMf[robot.frame_id(hand.prefixed(f.tip_frame))].translation for f in hand.fingers]
     return palm.actInv(np.mean(tips, axis=0))
 
@@ -37,8 +37,7 @@ def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
 def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, offset: np.ndarray,
                    iterations: int = 150, tol: float = 1e-3) -> np.ndarray:
     """Damped least squares on torso + arm joints moving the point `offset` of the palm frame to `target` from q0."""
-    hand = robot.spec.arm(arm).hand
-    fid = robot.frame_id(hand.prefixed(hand.palm_frame))
+    fid = robot.frame_id(robot.palm_frame(arm))
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
     data = robot.model.createData()
     q = q0.copy()
@@ -61,17 +60,17 @@ def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray,
     """Try `seeds` starts (rest first, then random torso+arm); reachable if one ends within tolerance, collision-free."""
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
     offset = grasp_centre(robot, arm)
-    hand = robot.spec.arm(arm).hand
     data = robot.model.createData()
-    best = np.inf
+    best, closest = np.inf, robot.q_rest
     for s in range(seeds):
         q0 = robot.q_rest.copy()
         if s:
             q0[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
         q = solve_position(robot, arm, target, q0, offset)
-        centre = pin.SE3(robot.frame_placement(q, hand.prefixed(hand.palm_frame), data)).act(offset)
+        centre = pin.SE3(robot.frame_placement(q, robot.palm_frame(arm), data)).act(offset)
         d = float(np.linalg.norm(centre - target))
-        best = min(best, d)
+        if d < best:
+            best, closest = d, q
         if d <= tolerance and not checker.in_collision(q, arm):
             return ReachResult(arm, True, d, q)
-    return ReachResult(arm, False, best, None)
+    return ReachResult(arm, False, best, closest)

@@ -67,6 +67,11 @@ class Robot:
             raise KeyError(f"robot '{self.spec.name}' has no frame '{name}'")
         return fid
 
+    def palm_frame(self, arm: str) -> str:
+        """The name of an arm's palm frame: where grasp hand poses are expressed."""
+        hand = self.spec.arm(arm).hand
+        return hand.prefixed(hand.palm_frame)
+
     def clip(self, q: np.ndarray) -> np.ndarray:
         return np.clip(q, self.lower, self.upper)
 

@@ -9,13 +9,13 @@ import numpy as np
 
 from .pipeline import steps_until
 from .session import Session
-from .steps import Progress, Step, StepContext, no_progress, step_seed
+from .steps import Progress, Step, StepContext, StepFailed, no_progress, step_seed
 
 ProgressFactory = Callable[[Step], Progress]
 
 
 def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = None, progress: Progress = no_progress) -> Any:
-    """Run one step on the session's scene and earlier results, and record it."""
+    """Run one step on the session's scene and earlier results, and record it; StepFailed if its result reports a failure."""
     p = step.make_params(params)
     seed = step_seed(session.seed, step.name)
     inputs = {name: session.result(name) for name in step.needs}
@@ -23,6 +23,8 @@ def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = No
     start = time.perf_counter()
     result = step.run(ctx)
     session.record(step, p, seed, time.perf_counter() - start, result)
+    if getattr(result, "failure", ""):
+        raise StepFailed(step.name, result.failure)
     return result
 
 
@@ -30,10 +32,12 @@ def run_pipeline(session: Session, until: str | None = None, params: Mapping[str
                  progress: ProgressFactory | None = None) -> list[str]:
     """Run, in order, every step up to `until` that the session has not finished; returns their names."""
     params = params or {}
-    done = set(session.finished())
+    done = {r["name"]: r for r in session.records}
     ran = []
     for step in steps_until(until):
         if step.name in done:
+            if done[step.name]["stats"].get("failure"):
+                raise StepFailed(step.name, done[step.name]["stats"]["failure"])
             continue
         run_step(session, step, params.get(step.name), progress(step) if progress else no_progress)
         ran.append(step.name)

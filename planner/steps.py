@@ -20,6 +20,14 @@ from .task import Scene
 Progress = Callable[[float, str], None]
 
 
+class StepFailed(RegraspError):
+    """A step ran and was recorded, but its result says a stage kept nothing: the pipeline cannot go on."""
+
+    def __init__(self, step: str, failure: str):
+        super().__init__(f"step '{step}' failed: {failure}")
+        self.step, self.failure = step, failure
+
+
 def no_progress(fraction: float, message: str = "") -> None:
     """A progress callback that reports nowhere."""
 

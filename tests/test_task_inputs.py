@@ -169,7 +169,9 @@ def test_default_task_loads(default):
     assert default.object_mesh.is_watertight
     assert default.robot.nq == 49 and default.robot is load_robot(ALEX)
     assert default.q_initial.shape == (49,) and default.q_final.shape == (49,)
-    np.testing.assert_array_equal(default.q_initial, default.robot.q_rest)
+    ready = default.robot.configuration({"RightElbowPitch": -1.5, "LeftElbowPitch": -1.5})
+    np.testing.assert_array_equal(default.q_initial, ready)
+    np.testing.assert_array_equal(default.q_final, ready)
     xyz, rpy = data["object"]["initial"]["xyz"], data["object"]["initial"]["rpy"]
     np.testing.assert_allclose(default.object_initial[:3, 3], xyz)
     c, s = math.cos(rpy[2]), math.sin(rpy[2])

@@ -1,0 +1,128 @@
+"""The exchange position (paper V-C, figure 6): where in the air the object passes from hand to hand.
+
+A 3-D grid covers the region both hands reach (the intersection of each arm's reach sphere about
+its shoulder, the reach estimated by sampling the arm). A node is free when the object's bounding
+sphere about its centre of mass, centred there, clears the environment and the robot's torso at
+rest. Each node costs the wrists' travel ig + ge + ef + ie + ep + pf (exchange_grid.py), the grasp
+and place wrists taken from the best-scored grasp and place configurations; the cheapest free nodes
+are kept, best first. The exchange orientation depends on the double grasp (double_grasps.py).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .exchange_grid import WristWaypoints, best_nodes, exchange_costs, grid_nodes
+from .hand_placement import ObstacleTest
+from .object_collision import ObjectCollision
+from .reach import grasp_centre
+from .results import array
+from .robot import Robot
+from .stages import StageLog
+from .steps import Step, StepContext
+
+
+@dataclass(frozen=True)
+class ExchangeParams:
+    step: float = 0.05  # m: grid spacing
+    reach_fraction: float = 0.8  # a node is reachable within this fraction of each arm's reach
+    reach_samples: int = 1500  # arm configurations sampled to estimate an arm's reach
+    keep: int = 5  # best free nodes kept
+
+
+@dataclass(frozen=True)
+class Exchange:
+    """The grid, its costs and free nodes, and the best exchange positions (object centre of mass, world)."""
+
+    stages: list
+    failure: str
+    step: float
+    shoulders: list  # per arm (spec order): the shoulder position at rest
+    reach: list  # per arm: the reach radius used, m
+    nodes: np.ndarray = array("float64", ("k", 3))
+    cost: np.ndarray = array("float64", ("k",))
+    free: np.ndarray = array("bool", ("k",))  # reachable by both hands and collision-free
+    best: np.ndarray = array("int64", ("m",))  # indices into nodes, cheapest first
+    waypoints: np.ndarray = array("float64", (6, 3))  # WristWaypoints fields, in order
+
+    @property
+    def position(self) -> np.ndarray:
+        """The best exchange position."""
+        return self.nodes[self.best[0]]
+
+    def stats(self) -> dict:
+        return {"nodes": len(self.nodes), "free": int(self.free.sum()),
+                "best_cost": round(float(self.cost[self.best[0]]), 4) if len(self.best) else None,
+                **({"failure": self.failure} if self.failure else {})}
+
+
+def arm_reach(robot: Robot, arm: str, samples: int, rng: np.random.Generator) -> tuple[np.ndarray, float]:
+    """(the shoulder position at rest, the largest shoulder-to-grasp-centre distance over sampled arm configurations)."""
+    model, data = robot.model, robot.model.createData()
+    idx = robot.arm_idx[arm]
+    shoulder_joint = next(j for j in range(1, model.njoints) if model.joints[j].idx_q == idx[0])
+    palm = robot.frame_id(robot.palm_frame(arm))
+    offset = grasp_centre(robot, arm)
+    pin.forwardKinematics(model, data, robot.q_rest)
+    shoulder = data.oMi[shoulder_joint].translation.copy()
+    q = robot.q_rest.copy()
+    reach = 0.0
+    for _ in range(samples):
+        q[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
+        pin.forwardKinematics(model, data, q)
+        centre = pin.updateFramePlacement(model, data, palm).act(offset)
+        reach = max(reach, float(np.linalg.norm(centre - shoulder)))
+    return shoulder, reach
+
+
+def wrist(robot: Robot, arm: str, q: np.ndarray) -> np.ndarray:
+    return robot.frame_placement(q, robot.palm_frame(arm))[:3, 3]
+
+
+def run(ctx: StepContext) -> Exchange:
+    scene, p = ctx.scene, ctx.params
+    robot = scene.robot
+    configs = ctx.inputs["grasp_configs"]
+    log = StageLog()
+    pick, place = configs.hand("pick"), configs.hand("place")
+    ctx.progress(0.0, "arm reach")
+    reach = [arm_reach(robot, a, p.reach_samples, ctx.rng) for a in robot.spec.arm_names]
+    shoulders = np.array([s for s, _ in reach])
+    radii = np.array([r for _, r in reach]) * p.reach_fraction
+    lower = np.max(shoulders - radii[:, None], axis=0)
+    upper = np.min(shoulders + radii[:, None], axis=0)
+    nodes = grid_nodes(lower, upper, p.step) if np.all(upper > lower) else np.zeros((0, 3))
+    reachable = np.all(np.linalg.norm(nodes[:, None] - shoulders[None], axis=2) <= radii[None], axis=1)
+    log.done("grid nodes reachable by both hands", reachable.sum(), f"of {len(nodes)}, {p.step:g} m grid")
+    ctx.progress(0.4, "free nodes")
+    collision = ObjectCollision(scene)
+    radius = float(np.max(np.linalg.norm(scene.object_mesh.vertices - collision.com, axis=1)))
+    blocking = ObstacleTest([(ob.coal_shape(), ob.pose) for ob in scene.environment]
+                            + collision.robot_shapes(robot.q_rest, ("torso",)), collision.model.params.env_padding)
+    free = reachable.copy()
+    free[reachable] = ~blocking.spheres_hit(nodes[reachable], radius)
+    log.done("free nodes", free.sum(), f"object bounding sphere ({radius:.3f} m) clear of obstacles and torso")
+    failure, best, costs = "", np.zeros(0, np.int64), np.zeros(len(nodes))
+    w = np.zeros((6, 3))
+    if not len(pick.rank) or not len(place.rank):
+        failure = log.failure("no exchange position: a hand has no grasp configuration")
+    else:
+        a, b = configs.picking_arm, configs.placing_arm
+        q_grasp, q_place = pick.q[np.argmax(pick.score)], place.q[np.argmax(place.score)]
+        waypoints = WristWaypoints(wrist(robot, a, scene.q_initial), wrist(robot, a, q_grasp), wrist(robot, a, scene.q_final),
+                                   wrist(robot, b, scene.q_initial), wrist(robot, b, q_place), wrist(robot, b, scene.q_final))
+        w = np.array([waypoints.pick_initial, waypoints.pick_grasp, waypoints.pick_final,
+                      waypoints.place_initial, waypoints.place_place, waypoints.place_final])
+        costs = exchange_costs(nodes, waypoints)
+        best = best_nodes(costs, free, p.keep)
+        log.done("best exchange positions", len(best), "cheapest free nodes")
+        if not len(best):
+            failure = log.failure("no exchange position: no grid node is both reachable and collision-free")
+    ctx.progress(1.0, f"{int(free.sum())} free nodes")
+    return Exchange(log.stages, failure, p.step, shoulders.tolist(), radii.tolist(), nodes, costs, free, best, w)
+
+
+NAME = "exchange"
+STEP = Step(NAME, "exchange position: 3-D grid of the wrists' travel (V-C, fig. 6)", ("grasp_configs",), ExchangeParams, Exchange, run)
