@@ -39,7 +39,9 @@ def test_check_reports_a_task_that_needs_no_regrasp(tmp_path):
     from planner.paths import ASSETS
 
     text = (ASSETS / "tasks" / "default.toml").read_text()
-    text = text.replace("final = { xyz = [0.56, 0.92, 0.72]", "final = { xyz = [0.50, -0.70, 0.72]")
+    moved = text.replace("final = { xyz = [0.50, 0.85, 0.72]", "final = { xyz = [0.50, -0.70, 0.72]")
+    assert moved != text, "the default task's final placement changed: update this test"
+    text = moved
     task = tmp_path / "same_side.toml"
     task.write_text(text.replace('robot = "alex_allegro.toml"', f'robot = "{ASSETS / "robots" / "alex_allegro.toml"}"'))
     run = regrasp("check", str(task))

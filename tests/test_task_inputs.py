@@ -210,7 +210,8 @@ def test_task_joint_override_is_applied(tmp_path):
     names = scene.robot.joint_names()
     assert scene.q_initial[names.index("SpinePitch")] == 0.5
     assert scene.q_initial[names.index("right_hand/joint_0.0")] == -0.2
-    np.testing.assert_array_equal(scene.q_final, scene.robot.q_rest)
+    assert scene.q_initial[names.index("RightElbowPitch")] == scene.robot.q_rest[names.index("RightElbowPitch")]
+    np.testing.assert_array_equal(scene.q_final, scene.robot.configuration(TASK["robot_final"]["joints"]))
 
 
 def test_task_without_obstacles_or_configurations(tmp_path):
