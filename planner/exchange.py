@@ -41,9 +41,10 @@ class Exchange:
     step: float
     shoulders: list  # per arm (spec order): the shoulder position at rest
     reach: list  # per arm: the reach radius used, m
+    grid_nodes: int  # nodes of the whole grid box; only those both hands reach are kept below
     nodes: np.ndarray = array("float64", ("k", 3))
     cost: np.ndarray = array("float64", ("k",))
-    free: np.ndarray = array("bool", ("k",))  # reachable by both hands and collision-free
+    free: np.ndarray = array("bool", ("k",))  # collision-free
     best: np.ndarray = array("int64", ("m",))  # indices into nodes, cheapest first
     waypoints: np.ndarray = array("float64", (6, 3))  # WristWaypoints fields, in order
 
@@ -53,7 +54,7 @@ class Exchange:
         return self.nodes[self.best[0]]
 
     def stats(self) -> dict:
-        return {"nodes": len(self.nodes), "free": int(self.free.sum()),
+        return {"reachable_nodes": len(self.nodes), "free": int(self.free.sum()),
                 "best_cost": round(float(self.cost[self.best[0]]), 4) if len(self.best) else None,
                 **({"failure": self.failure} if self.failure else {})}
 
@@ -93,16 +94,15 @@ def run(ctx: StepContext) -> Exchange:
     radii = np.array([r for _, r in reach]) * p.reach_fraction
     lower = np.max(shoulders - radii[:, None], axis=0)
     upper = np.min(shoulders + radii[:, None], axis=0)
-    nodes = grid_nodes(lower, upper, p.step) if np.all(upper > lower) else np.zeros((0, 3))
-    reachable = np.all(np.linalg.norm(nodes[:, None] - shoulders[None], axis=2) <= radii[None], axis=1)
-    log.done("grid nodes reachable by both hands", reachable.sum(), f"of {len(nodes)}, {p.step:g} m grid")
+    box = grid_nodes(lower, upper, p.step) if np.all(upper > lower) else np.zeros((0, 3))
+    nodes = box[np.all(np.linalg.norm(box[:, None] - shoulders[None], axis=2) <= radii[None], axis=1)]
+    log.done("grid nodes reachable by both hands", len(nodes), f"of {len(box)}, {p.step:g} m grid")
     ctx.progress(0.4, "free nodes")
     collision = ObjectCollision(scene)
     radius = float(np.max(np.linalg.norm(scene.object_mesh.vertices - collision.com, axis=1)))
     blocking = ObstacleTest([(ob.coal_shape(), ob.pose) for ob in scene.environment]
                             + collision.robot_shapes(robot.q_rest, ("torso",)), collision.model.params.env_padding)
-    free = reachable.copy()
-    free[reachable] = ~blocking.spheres_hit(nodes[reachable], radius)
+    free = ~blocking.spheres_hit(nodes, radius)
     log.done("free nodes", free.sum(), f"object bounding sphere ({radius:.3f} m) clear of obstacles and torso")
     failure, best, costs = "", np.zeros(0, np.int64), np.zeros(len(nodes))
     w = np.zeros((6, 3))
@@ -119,9 +119,9 @@ def run(ctx: StepContext) -> Exchange:
         best = best_nodes(costs, free, p.keep)
         log.done("best exchange positions", len(best), "cheapest free nodes")
         if not len(best):
-            failure = log.failure("no exchange position: no grid node is both reachable and collision-free")
+            failure = log.failure("no exchange position: no grid node both hands reach is collision-free")
     ctx.progress(1.0, f"{int(free.sum())} free nodes")
-    return Exchange(log.stages, failure, p.step, shoulders.tolist(), radii.tolist(), nodes, costs, free, best, w)
+    return Exchange(log.stages, failure, p.step, shoulders.tolist(), radii.tolist(), len(box), nodes, costs, free, best, w)
 
 
 NAME = "exchange"
