@@ -1,0 +1,176 @@
+"""Grasp configurations, exchange position and double grasps on the default task: every configuration re-checked
+independently, the exchange node minimal over the free nodes, the ranking as documented, determinism, and the
+stage-named failure of a task whose object only the placing arm can reach."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import trimesh
+
+from planner.collision import build_collision_model
+from planner.environment import Obstacle
+from planner.exchange_grid import WristWaypoints, exchange_costs
+from planner.paths import ASSETS
+from planner.runner import run_pipeline
+from planner.session import Session
+
+SEED = 3  # as the session tests: the grasp lists come from the shared test cache
+POSITION_TOL, ROTATION_TOL = 2e-3, 2e-2  # the step's IK tolerances
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory, default_scene):
+    session = Session.create(tmp_path_factory.mktemp("dg") / "session", default_scene, seed=SEED)
+    run_pipeline(session, until="double-grasps")
+    return session
+
+
+def independent_collisions(scene, q: np.ndarray, object_pose: np.ndarray, holding: tuple[str, ...]) -> list[tuple[str, str]]:
+    """Every colliding pair with the object built into a fresh model at its pose, all pairs through the narrow phase
+    (no broad phase, no subsets), minus the holding hands against the object."""
+    obj = Obstacle("object", "mesh", (), object_pose, mesh=scene.object_mesh)
+    cm = build_collision_model(scene.robot, scene.environment + (obj,))
+    gm = cm.geometry
+    gd = pin.GeometryData(gm)
+    for k in cm.subsets["env"]:
+        gd.collisionRequests[int(k)].security_margin = cm.params.env_padding
+    pin.computeCollisions(scene.robot.model, scene.robot.model.createData(), gm, gd, q, False)
+    names = [o.name for o in gm.geometryObjects]
+    hands = tuple(scene.robot.spec.arm(a).hand.prefix for a in holding)
+    out = []
+    for k, pair in enumerate(gm.collisionPairs):
+        if gd.collisionResults[k].isCollision():
+            a, b = names[pair.first], names[pair.second]
+            if "env/object" in (a, b) and (a.startswith(hands) or b.startswith(hands)):
+                continue
+            out.append((a, b))
+    return out
+
+
+def object_hits_obstacles(scene, object_pose: np.ndarray) -> bool:
+    """python-fcl (through trimesh) on the meshes: the object at a pose against every obstacle."""
+    manager = trimesh.collision.CollisionManager()
+    for ob in scene.environment:
+        manager.add_object(ob.name, ob.to_trimesh())
+    return manager.in_collision_single(scene.object_at(object_pose))
+
+
+def assert_holds(scene, q: np.ndarray, arm: str, grasps, rank: int, object_pose: np.ndarray) -> None:
+    robot = scene.robot
+    assert robot.within_limits(q), f"{arm} configuration outside the joint limits"
+    palm = robot.frame_placement(q, robot.palm_frame(arm))
+    target = object_pose @ grasps.hand_pose[rank]
+    assert np.linalg.norm(palm[:3, 3] - target[:3, 3]) <= POSITION_TOL
+    assert np.linalg.norm(pin.log3(palm[:3, :3].T @ target[:3, :3])) <= ROTATION_TOL
+    np.testing.assert_array_equal(q[robot.hand_idx[arm]], grasps.finger_q[rank])
+
+
+def test_grasp_and_place_configurations_are_valid(planned):
+    scene = planned.scene
+    configs = planned.result("grasp_configs")
+    assert not configs.failure
+    for role, grasps, pose, free in (("pick", planned.result("pick_grasps"), scene.object_initial, configs.pick_env_free),
+                                     ("place", planned.result("place_grasps"), scene.object_final, configs.place_env_free)):
+        hand = configs.hand(role)
+        assert len(hand.rank) >= 1 and np.all(free[hand.rank]), f"{role}: a configuration for a grasp the filter removed"
+        assert free.sum() < len(free), f"{role}: the environment filter removed nothing (the desk must cut grasps from below)"
+        for rank, q in zip(hand.rank, hand.q):
+            assert_holds(scene, q, hand.arm, grasps, int(rank), pose)
+            assert independent_collisions(scene, q, pose, (hand.arm,)) == []
+
+
+def test_double_grasps_are_valid_and_ranked(planned):
+    scene = planned.scene
+    dg = planned.result("double_grasps")
+    pick, place = planned.result("pick_grasps"), planned.result("place_grasps")
+    a, b = dg.picking_arm, dg.placing_arm
+    assert not dg.failure and len(dg) >= 4
+    assert planned.record_of("double_grasps")["stats"]["double_grasps"] == len(dg)
+    assert np.all(np.diff(dg.score) <= 1e-12), "double grasps are not best first"
+    np.testing.assert_allclose(dg.score, dg.quality + dg.config)
+    assert np.all((dg.quality > 0) & (dg.quality <= 1)) and np.all((dg.config > 0) & (dg.config <= 1))
+    for n in range(len(dg)):
+        r1, r2, T = int(dg.pick_rank[n]), int(dg.place_rank[n]), dg.object_exchange[n]
+        assert_holds(scene, dg.q_grasp[n], a, pick, r1, scene.object_initial)
+        assert_holds(scene, dg.q_place[n], b, place, r2, scene.object_final)
+        assert_holds(scene, dg.q_exch[n], a, pick, r1, T)
+        assert_holds(scene, dg.q_exch[n], b, place, r2, T)
+        assert independent_collisions(scene, dg.q_grasp[n], scene.object_initial, (a,)) == []
+        assert independent_collisions(scene, dg.q_place[n], scene.object_final, (b,)) == []
+        assert independent_collisions(scene, dg.q_exch[n], T, (a, b)) == []
+        assert not object_hits_obstacles(scene, T), f"double grasp {n}: the object hits an obstacle at the exchange"
+        assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)) and np.isclose(np.linalg.det(T[:3, :3]), 1.0)
+
+
+def test_exchange_node_is_the_cheapest_free_node(planned):
+    scene = planned.scene
+    x = planned.result("exchange")
+    w = WristWaypoints(*x.waypoints)
+    d = lambda p, r: float(np.linalg.norm(p - r))
+    brute = np.array([d(w.pick_initial, w.pick_grasp) + d(w.pick_grasp, e) + d(e, w.pick_final)
+                      + d(w.place_initial, e) + d(e, w.place_place) + d(w.place_place, w.place_final) for e in x.nodes])
+    np.testing.assert_allclose(x.cost, brute, atol=1e-12)
+    np.testing.assert_allclose(exchange_costs(x.nodes, w), brute, atol=1e-12)
+    free = np.flatnonzero(x.free)
+    assert x.best[0] == free[np.argmin(brute[free])]
+    assert np.all(np.diff(brute[x.best]) >= 0) and np.all(x.free[x.best])
+    radius = float(np.max(np.linalg.norm(scene.object_mesh.vertices - scene.object_mesh.center_mass, axis=1)))
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=radius).apply_translation(x.position)
+    manager = trimesh.collision.CollisionManager()
+    for ob in scene.environment:
+        manager.add_object(ob.name, ob.to_trimesh())
+    assert not manager.in_collision_single(sphere), "the best exchange node's object sphere hits an obstacle"
+
+
+def test_same_seed_same_double_grasps(planned, tmp_path):
+    again = Session.create(tmp_path / "again", planned.scene, seed=SEED)
+    run_pipeline(again, until="double_grasps")
+    for name in ("grasp_configs", "exchange", "double_grasps"):
+        first, second = planned.result(name), again.result(name)
+        for field in ("pick_q", "place_q", "cost", "best", "q_exch", "object_exchange", "score"):
+            if hasattr(first, field):
+                np.testing.assert_array_equal(getattr(first, field), getattr(second, field))
+
+
+def _plan(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "planner.cli", "plan", *args], capture_output=True, text=True, timeout=900)
+
+
+def test_plan_until_double_grasps_prints_the_stage_table(tmp_path):
+    out = tmp_path / "s"
+    run = _plan("default", "--out", str(out), "--seed", str(SEED), "--until", "double-grasps")
+    assert run.returncode == 0, run.stderr
+    for stage in ("pick grasps clear of the environment", "place grasp configurations", "free nodes",
+                  "compatible pairs", "exchange configurations"):
+        assert stage in run.stdout
+    steps = json.loads((out / "session.json").read_text())["steps"]
+    assert [s["name"] for s in steps][-3:] == ["grasp_configs", "exchange", "double_grasps"]
+    assert steps[-1]["stats"]["double_grasps"] >= 4 and all(s["seconds"] >= 0 for s in steps)
+
+
+def test_object_only_the_placing_arm_reaches_fails_at_the_pick_stage(tmp_path):
+    text = (ASSETS / "tasks" / "default.toml").read_text()
+    moved = text.replace("initial = { xyz = [0.45, -0.85, 0.72], rpy = [0.0, 0.0, 1.2] }",
+                         "initial = { xyz = [0.50, 0.85, 0.72], rpy = [0.0, 0.0, 2.7] }")  # where the final one is
+    assert moved != text, "the default task's initial placement changed: update this test"
+    task = tmp_path / "left_only.toml"
+    task.write_text(moved.replace('robot = "alex_allegro.toml"', f'robot = "{ASSETS / "robots" / "alex_allegro.toml"}"'))
+    out = tmp_path / "s"
+    forced = ("--set", "arms.picking_arm=right", "--set", "arms.placing_arm=left")
+    run = _plan(str(task), "--out", str(out), "--seed", str(SEED), "--until", "double-grasps", *forced)
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert "Traceback" not in run.stderr
+    assert "step 'grasp_configs' failed: no collision-free pick grasp" in run.stderr
+    assert "pick grasp configurations: 0" in run.stderr
+    assert "pick grasp configurations" in run.stdout  # the stage table is printed too
+    steps = json.loads((out / "session.json").read_text())["steps"]
+    assert steps[-1]["name"] == "grasp_configs" and "no collision-free pick grasp" in steps[-1]["stats"]["failure"]
+    resumed = _plan(str(task), "--out", str(out), "--resume", "--until", "double-grasps")
+    assert resumed.returncode == 1 and "no collision-free pick grasp" in resumed.stderr
