@@ -79,3 +79,48 @@ def bench_collision(scene: Scene, samples: int = 2000, seed: int = 0) -> Collisi
         self_check_us_median=float(np.median(self_only)),
         fk_us_median=float(np.median(fk)),
     )
+
+
+ONLINE_STEPS = ("grasp_configs", "exchange", "double_grasps")
+
+
+@dataclass(frozen=True)
+class DoubleGraspBench:
+    """Seconds of the online grasp steps per run (the grasp lists and arms loaded from a session, not timed)."""
+
+    runs: list  # per run: step name -> seconds
+    double_grasps: list  # per run: how many were returned
+    stages: list  # the last run's (step, stages)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def render(self) -> str:
+        from .stages import stage_table
+
+        totals = [sum(r.values()) for r in self.runs]
+        out = [f"{'step':<16}{'first run s':>12}{'median s':>10}{'max s':>8}"]
+        for name in ONLINE_STEPS + ("total",):
+            values = totals if name == "total" else [r[name] for r in self.runs]
+            out.append(f"{name:<16}{values[0]:>12.3f}{float(np.median(values)):>10.3f}{max(values):>8.3f}")
+        out += ["", f"double grasps returned per run: {', '.join(map(str, self.double_grasps))}", "", stage_table(self.stages)]
+        return "\n".join(out)
+
+
+def bench_double_grasps(scene: Scene, seed: int, repeat: int, folder, progress=print) -> DoubleGraspBench:
+    """Run arms and both grasp lists once (from the cache when there), then the online steps `repeat` times on branches."""
+    from .runner import run_pipeline
+    from .session import Session
+
+    base = Session.create(folder / "base", scene, seed)
+    progress("arms and grasp lists (from the user cache when computed before) ...")
+    run_pipeline(base, until="place_grasps")
+    runs, counts, stages = [], [], []
+    for i in range(repeat):
+        branch = base.branch(folder / f"run{i}", ONLINE_STEPS[0])
+        run_pipeline(branch, until=ONLINE_STEPS[-1])
+        runs.append({name: branch.record_of(name)["seconds"] for name in ONLINE_STEPS})
+        counts.append(len(branch.result("double_grasps")))
+        stages = [(name, branch.result(name).stages) for name in ONLINE_STEPS]
+        progress(f"run {i + 1}/{repeat}: {sum(runs[-1].values()):.3f} s, {counts[-1]} double grasps")
+    return DoubleGraspBench(runs, counts, stages)

@@ -48,6 +48,21 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
+    import tempfile
+
+    from .bench import bench_double_grasps
+    from .task import load_task
+
+    scene = load_task(args.task)
+    with tempfile.TemporaryDirectory(prefix="regrasp-bench-") as tmp:
+        result = bench_double_grasps(scene, args.seed, args.repeat, Path(tmp), lambda m: print(m, file=sys.stderr))
+    print(result.render())
+    if args.json:
+        _write_json(Path(args.json), result.to_dict())
+    return 0
+
+
 def _cmd_plan(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -260,6 +275,12 @@ def parser() -> argparse.ArgumentParser:
     bc.add_argument("--seed", type=int, default=0)
     bc.add_argument("--json", help="also write the figures to this JSON file")
     bc.set_defaults(func=_cmd_bench)
+    bd = bsub.add_parser("double-grasps", help="grasp configurations, exchange position and double grasps, timed over runs")
+    bd.add_argument("--task", default=str(DEFAULT_TASK))
+    bd.add_argument("--seed", type=int, default=0, help="session seed")
+    bd.add_argument("--repeat", type=int, default=5)
+    bd.add_argument("--json", help="also write the figures to this JSON file")
+    bd.set_defaults(func=_cmd_bench_double_grasps)
     return p
 
 

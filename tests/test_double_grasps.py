@@ -174,3 +174,14 @@ def test_object_only_the_placing_arm_reaches_fails_at_the_pick_stage(tmp_path):
     assert steps[-1]["name"] == "grasp_configs" and "no collision-free pick grasp" in steps[-1]["stats"]["failure"]
     resumed = _plan(str(task), "--out", str(out), "--resume", "--until", "double-grasps")
     assert resumed.returncode == 1 and "no collision-free pick grasp" in resumed.stderr
+
+
+def test_bench_double_grasps_json(planned, tmp_path):
+    out = tmp_path / "bench.json"
+    run = subprocess.run([sys.executable, "-m", "planner.cli", "bench", "double-grasps", "--seed", str(SEED), "--repeat", "2",
+                          "--json", str(out)], capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr
+    figures = json.loads(out.read_text())
+    assert len(figures["runs"]) == 2 and set(figures["runs"][0]) == {"grasp_configs", "exchange", "double_grasps"}
+    assert figures["double_grasps"][0] == figures["double_grasps"][1] == len(planned.result("double_grasps"))
+    assert "total" in run.stdout and "exchange configurations" in run.stdout
