@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .reach import grasp_centre
+from .reach import approach_direction
 from .robot import Robot
 
 
@@ -41,7 +41,7 @@ class ConfigScorer:
         self.data = robot.model.createData()
         model = robot.model
         self.palm = {a: robot.frame_id(robot.palm_frame(a)) for a in robot.spec.arm_names}
-        self.approach = {a: (c := grasp_centre(robot, a)) / np.linalg.norm(c) for a in robot.spec.arm_names}
+        self.approach = {a: approach_direction(robot, a) for a in robot.spec.arm_names}
         joint_of = {model.joints[j].idx_q: j for j in range(1, model.njoints)}
         self.shoulder = {a: joint_of[int(idx[0])] for a, idx in robot.arm_idx.items()}
         self.wrist = {a: joint_of[int(idx[-1])] for a, idx in robot.arm_idx.items()}

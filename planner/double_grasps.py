@@ -23,7 +23,7 @@ from .grasps import GraspList
 from .hand_model import load_hand_model
 from .hand_placement import hands_collide, posed_shapes
 from .object_collision import ObjectCollision
-from .reach import grasp_centre
+from .reach import approach_direction
 from .results import array
 from .stages import StageLog
 from .steps import Step, StepContext
@@ -139,7 +139,7 @@ def run(ctx: StepContext) -> DoubleGrasps:
     order = np.lexsort((np.arange(len(pairs)), -score))
     collision = ObjectCollision(scene)
     sampler = ConfigSampler(robot, collision, ConfigScorer(robot), GraspConfigParams(torso_sigma=p.torso_sigma))
-    approach = {arm: (c := grasp_centre(robot, arm)) / np.linalg.norm(c) for arm in (a, b)}
+    approach = {arm: approach_direction(robot, arm) for arm in (a, b)}
     shoulders = dict(zip(robot.spec.arm_names, np.asarray(exchange.shoulders)))
     found, tried = [], 0
     for k in order[: p.max_pairs]:

@@ -20,15 +20,26 @@ def _run(i: int) -> Any:
     return fn(jobs[i])
 
 
-def forked_map(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int | None = None) -> list[Any]:
-    """[fn(job) for job in jobs], in order, over up to `workers` forked processes (default: the CPU count)."""
+def forked_map(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int | None = None,
+               on_result: Callable[[Any], None] | None = None) -> list[Any]:
+    """[fn(job) for job in jobs], in order, over up to `workers` forked processes (default: the CPU count);
+    `on_result` sees each result as it arrives, in order (for progress reports)."""
     global _JOBS
     workers = min(len(jobs), workers or os.cpu_count() or 1)
+    out: list[Any] = []
     if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-        return [fn(job) for job in jobs]
-    _JOBS = (fn, jobs)
+        results = map(fn, jobs)
+    else:
+        _JOBS = (fn, jobs)
+        pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
+        results = pool.map(_run, range(len(jobs)))
     try:
-        with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
-            return list(pool.map(_run, range(len(jobs))))
+        for result in results:
+            out.append(result)
+            if on_result is not None:
+                on_result(result)
     finally:
-        _JOBS = None
+        if workers > 1 and _JOBS is not None:
+            pool.shutdown()
+            _JOBS = None
+    return out

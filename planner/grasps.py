@@ -10,8 +10,6 @@ hand spec and URDF, the mesh, the parameters, the seed and the code version.
 from __future__ import annotations
 
 import collections
-import concurrent.futures
-import multiprocessing
 import os
 import time
 from dataclasses import dataclass
@@ -22,6 +20,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from .errors import RegraspError
+from .forked import forked_map
 from .finger_workspace import FingerWorkspace, WorkspaceParams, hand_workspaces
 from .grasp_frames import box_grid, hopf_rotations
 from .grasp_search import OUTCOMES, FrameGrasp, GraspSearch, SearchParams
@@ -155,39 +154,20 @@ def grasp_frames(mesh: trimesh.Trimesh, centre: np.ndarray, p: GraspParams, seed
     return H.reshape(-1, 4, 4)
 
 
-_SEARCH: GraspSearch | None = None
-
-
-def _adopt(search: GraspSearch) -> None:
-    """Pool initializer: the forked worker keeps the parent's (read-only) search."""
-    global _SEARCH
-    _SEARCH = search
-
-
-def _search_frames(frames: np.ndarray) -> list[FrameGrasp]:
-    assert _SEARCH is not None
-    return [_SEARCH.at_frame(H) for H in frames]
-
-
 def _object(mesh: trimesh.Trimesh, hand: HandModel, p: GraspParams) -> ObjectModel:
     return object_model(mesh, p.point_step * min(f.tip_radius for f in hand.fingers))
 
 
 def _run_frames(search: GraspSearch, frames: np.ndarray, workers: int, progress: Progress) -> list[FrameGrasp]:
-    """Every frame's grasp, in frame order: inline for one worker, else in a pool of `workers` forked processes
-    (fork: the workers start at once and share the models; spawn would re-import everything, seconds per worker)."""
+    """Every frame's grasp, in frame order, in chunks over `workers` forked processes sharing the (read-only) search."""
     chunks = np.array_split(frames, max(1, workers * CHUNKS_PER_WORKER))
     out: list[FrameGrasp] = []
-    if workers <= 1:
-        for chunk in chunks:
-            out += [search.at_frame(H) for H in chunk]
-            progress(len(out) / len(frames), f"{len(out)} of {len(frames)} frames")
-        return out
-    ctx = multiprocessing.get_context("fork")
-    with concurrent.futures.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_adopt, initargs=(search,)) as pool:
-        for part in pool.map(_search_frames, chunks):
-            out += part
-            progress(len(out) / len(frames), f"{len(out)} of {len(frames)} frames")
+
+    def arrived(part: list[FrameGrasp]) -> None:
+        out.extend(part)
+        progress(len(out) / len(frames), f"{len(out)} of {len(frames)} frames")
+
+    forked_map(lambda chunk: [search.at_frame(H) for H in chunk], chunks, workers, arrived)
     return out
 
 

@@ -34,6 +34,12 @@ def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
     return palm.actInv(np.mean(tips, axis=0))
 
 
+def approach_direction(robot: Robot, arm: str) -> np.ndarray:
+    """The unit direction, in the palm frame, from the palm towards the grasp centre: where the hand approaches from."""
+    c = grasp_centre(robot, arm)
+    return c / np.linalg.norm(c)
+
+
 def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, offset: np.ndarray,
                    iterations: int = 150, tol: float = 1e-3) -> np.ndarray:
     """Damped least squares on torso + arm joints moving the point `offset` of the palm frame to `target` from q0."""
