@@ -26,7 +26,7 @@ class SessionLayers(Rooted):
         self.errors: dict[str, str] = {}
         for name in session.finished():
             if name in LAYERS:
-                layer = LAYERS[name](server, session.scene, f"{root}/{name}", workbench)
+                layer = LAYERS[name](server, session.scene, f"{root}/{name}", workbench, session)
                 try:
                     layer.update(session.result(name))
                 except Exception as exc:  # a drawing bug must not take the replay down

@@ -15,11 +15,12 @@ from ..rooted import Rooted
 class StepLayer(Rooted, ABC):
     """Draws one step's result; `update(result)` (re)draws it and fills `poses`: robot configurations worth showing, by label."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Any = None):
         super().__init__(server, root)
         self.server = server
         self.scene = scene
         self.workbench = workbench  # the live Workbench whose robot a layer may pose; None in an HTML export
+        self.session = session  # the drawn Session: a layer reads the earlier steps' results it needs from it
         self.name = root
         self.poses: dict[str, np.ndarray] = {}
 

@@ -16,12 +16,11 @@ from planner.hand_model import HandModel, load_hand_model
 from planner.object_model import object_model
 from planner.task import Scene
 
-from ..meshes import coal_to_trimesh, matrix_wxyz
+from ..meshes import matrix_wxyz
 from .base import StepLayer
+from .hands import HandMeshes
 
 POINT_SIZE = 0.004  # m
-HAND_STYLE = ((200, 200, 210), 0.6)
-TIP_COLOR = (250, 200, 40)
 CONTACT_COLOR = (230, 30, 30)
 CONTACT_SIZE = 0.008  # m
 NORMAL_LENGTH = 0.04  # m
@@ -73,9 +72,8 @@ class GraspsLayer(StepLayer):
         self.scores: viser.GuiMarkdownHandle | None = None
         self.result: GraspList | None = None
         self.hand_model: HandModel | None = None
-        self.hand_frame: viser.FrameHandle | None = None
+        self.hand: HandMeshes | None = None
         self.shown_rank: int | None = None
-        self._shape_handles: list[viser.MeshHandle] = []
         self._sphere_handles: list[viser.MeshHandle] = []
 
     def update(self, result: GraspList) -> None:
@@ -91,14 +89,7 @@ class GraspsLayer(StepLayer):
         model = object_model(scene.object_mesh, GraspParams().point_step * min(result.tip_radius))
         self.server.scene.add_point_cloud(f"{obj_node}/points", model.points.astype(np.float32), leaf_colors(model.leaf_ids()),
                                           point_size=POINT_SIZE, point_shape="circle", precision="float32")
-        self.hand_frame = self.server.scene.add_frame(f"{obj_node}/hand", show_axes=False, visible=False)
-        self._shape_handles = []
-        for i, (shape, pose) in enumerate(hand.shape_poses(hand.open_q)):
-            mesh = coal_to_trimesh(shape.geometry)
-            color = TIP_COLOR if shape.is_tip else HAND_STYLE[0]
-            self._shape_handles.append(self.server.scene.add_mesh_simple(
-                f"{obj_node}/hand/shape_{i}", mesh.vertices, mesh.faces, color=color, opacity=HAND_STYLE[1],
-                flat_shading=True, cast_shadow=False, receive_shadow=False))
+        self.hand = HandMeshes(self.server, f"{obj_node}/hand", hand, visible=False)
         self._sphere_handles = []
         for i, ws in enumerate(hand_workspaces(hand, GraspParams().workspace())):
             if len(ws.radii) == 0:
@@ -151,15 +142,11 @@ class GraspsLayer(StepLayer):
 
     def show(self, rank: int) -> None:
         """Draw the grasp at `rank` (0 = best): the hand at its pose and configuration, its contacts, normals and cones."""
-        r, hand = self.result, self.hand_model
-        assert r is not None and hand is not None and self.hand_frame is not None
+        r = self.result
+        assert r is not None and self.hand is not None
         obj_node = f"{self.name}/object"
         with self.server.atomic():
-            wxyz, xyz = matrix_wxyz(r.hand_pose[rank])
-            self.hand_frame.wxyz, self.hand_frame.position = wxyz, xyz
-            self.hand_frame.visible = True
-            for handle, (_, pose) in zip(self._shape_handles, hand.shape_poses(r.finger_q[rank])):
-                handle.wxyz, handle.position = matrix_wxyz(pose)
+            self.hand.pose(r.hand_pose[rank], r.finger_q[rank])
             mask = r.contact_mask[rank]
             points, normals = r.contact_point[rank][mask], r.contact_normal[rank][mask]
             if len(points):
