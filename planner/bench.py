@@ -121,6 +121,6 @@ def bench_double_grasps(scene: Scene, seed: int, repeat: int, folder, progress=p
         run_pipeline(branch, until=ONLINE_STEPS[-1])
         runs.append({name: branch.record_of(name)["seconds"] for name in ONLINE_STEPS})
         counts.append(len(branch.result("double_grasps")))
-        stages = [(name, branch.result(name).stages) for name in ONLINE_STEPS]
+        stages = [(name, branch.result(name).stages, branch.record_of(name).get("stage_seconds", [])) for name in ONLINE_STEPS]
         progress(f"run {i + 1}/{repeat}: {sum(runs[-1].values()):.3f} s, {counts[-1]} double grasps")
     return DoubleGraspBench(runs, counts, stages)

@@ -108,7 +108,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         figures = ", ".join(f"{k}={v}" for k, v in record["stats"].items() if k != "failure")
         mark = "" if record["name"] in ran else "  (earlier run)"
         print(f"{record['name']:<16}{record['seconds']:>9.2f}  {figures}{mark}")
-    staged = [(r["name"], session.result(r["name"]).stages) for r in session.records
+    staged = [(r["name"], session.result(r["name"]).stages, r.get("stage_seconds", [])) for r in session.records
               if "stages" in {f.name for f in dataclasses.fields(step_named(r["name"]).result)}]
     if staged:
         print()

@@ -167,6 +167,7 @@ def run(ctx: StepContext) -> DoubleGrasps:
     ks = np.array([f[0] for f in found], np.int64)
     nq = robot.nq
     ctx.progress(1.0, f"{len(found)} double grasps")
+    ctx.timings.extend(log.seconds)
     return DoubleGrasps(
         a, b, len(hp.rank) * len(hq.rank), len(pairs), tried, log.stages, failure,
         pick_rank=hp.rank[i[ks]], place_rank=hq.rank[j[ks]], q_grasp=hp.q[i[ks]].reshape(-1, nq),

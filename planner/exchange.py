@@ -121,6 +121,7 @@ def run(ctx: StepContext) -> Exchange:
         if not len(best):
             failure = log.failure("no exchange position: no grid node both hands reach is collision-free")
     ctx.progress(1.0, f"{int(free.sum())} free nodes")
+    ctx.timings.extend(log.seconds)
     return Exchange(log.stages, failure, p.step, shoulders.tolist(), radii.tolist(), len(box), nodes, costs, free, best, w)
 
 

@@ -184,8 +184,8 @@ class HandJob:
     rng: np.random.Generator
 
 
-def hand_job(job: HandJob) -> tuple[np.ndarray, HandConfigs, list[dict]]:
-    """(environment-free mask, configurations, stages) of one hand."""
+def hand_job(job: HandJob) -> tuple[np.ndarray, HandConfigs, StageLog]:
+    """(environment-free mask, configurations, stage log) of one hand."""
     scene, grasps = job.scene, job.grasps
     log = StageLog()
     collision = job.collision
@@ -195,7 +195,7 @@ def hand_job(job: HandJob) -> tuple[np.ndarray, HandConfigs, list[dict]]:
     sampler = ConfigSampler(scene.robot, collision, ConfigScorer(scene.robot, job.params.weights()), job.params)
     configs = hand_configurations(sampler, grasps, np.flatnonzero(free), job.object_pose, job.start, job.rng)
     log.done(f"{job.role} grasp configurations", len(configs.rank), f"collision-free, object at the {placement} pose")
-    return free, configs, log.stages
+    return free, configs, log
 
 
 def run(ctx: StepContext) -> GraspConfigs:
@@ -209,10 +209,10 @@ def run(ctx: StepContext) -> GraspConfigs:
     jobs = [HandJob("pick", scene, collision, p, pick, scene.object_initial, arms.q_pick, rngs[0]),
             HandJob("place", scene, collision, p, place, scene.object_final, arms.q_place, rngs[1])]
     ctx.progress(0.0, "pick and place configurations (one process per hand)")
-    (pick_free, pick_cfg, pick_stages), (place_free, place_cfg, place_stages) = forked_map(hand_job, jobs, p.workers)
-    stages = pick_stages + place_stages
+    (pick_free, pick_cfg, pick_log), (place_free, place_cfg, place_log) = forked_map(hand_job, jobs, p.workers)
     log = StageLog()
-    log.stages = stages
+    log.stages, log.seconds = pick_log.stages + place_log.stages, pick_log.seconds + place_log.seconds
+    ctx.timings.extend(log.seconds)
     failure = ""
     if not len(pick_cfg.rank):
         failure = log.failure(f"no collision-free pick grasp: the {arms.picking_arm} hand has no grasp with a robot configuration")
@@ -221,7 +221,7 @@ def run(ctx: StepContext) -> GraspConfigs:
     ctx.progress(1.0, f"{len(pick_cfg.rank)} pick, {len(place_cfg.rank)} place configurations")
     fields = {f"{role}_{f}": getattr(h, f) for role, h in (("pick", pick_cfg), ("place", place_cfg))
               for f in ("rank", "q", "arm_score", "free_score", "score")}
-    return GraspConfigs(arms.picking_arm, arms.placing_arm, stages, failure, pick_free, place_free, **fields)
+    return GraspConfigs(arms.picking_arm, arms.placing_arm, log.stages, failure, pick_free, place_free, **fields)
 
 
 NAME = "grasp_configs"

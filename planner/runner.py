@@ -22,7 +22,7 @@ def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = No
     ctx = StepContext(session.scene, inputs, p, np.random.default_rng(seed), progress)
     start = time.perf_counter()
     result = step.run(ctx)
-    session.record(step, p, seed, time.perf_counter() - start, result)
+    session.record(step, p, seed, time.perf_counter() - start, result, ctx.timings)
     if getattr(result, "failure", ""):
         raise StepFailed(step.name, result.failure)
     return result

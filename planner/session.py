@@ -182,12 +182,15 @@ class Session:
             self._results[name] = load_result(step_named(name).result, self.folder, name, {"nq": self.scene.robot.nq})
         return self._results[name]
 
-    def record(self, step: Step, params: Any, seed: int, seconds: float, result: Any) -> None:
-        """Save a finished step: its files first, then the manifest (so a crash never lists a half-written step)."""
+    def record(self, step: Step, params: Any, seed: int, seconds: float, result: Any, stage_seconds: list[float] = ()) -> None:
+        """Save a finished step: its files first, then the manifest (so a crash never lists a half-written step).
+        `stage_seconds` (steps with stages only) are kept in the record, outside the result."""
         files = save_result(result, self.folder, step.name)
         self._results[step.name] = result
         entry = {"name": step.name, "params": dataclasses.asdict(params), "seed": seed, "seconds": round(seconds, 4),
                  "stats": result.stats(), "files": files}
+        if stage_seconds:
+            entry["stage_seconds"] = [round(float(t), 4) for t in stage_seconds]
         order = [s.name for s in PIPELINE]
         steps = [r for r in self.records if r["name"] != step.name] + [entry]
         self.manifest["steps"] = sorted(steps, key=lambda r: order.index(r["name"]))

@@ -2,7 +2,9 @@
 
 The online steps (grasp configurations, exchange, double grasps) funnel candidates through
 stages; their results carry the stage list (for the stage table of `regrasp plan`) and, when a
-stage kept nothing, a `failure` message naming it with the numbers at every stage before.
+stage kept nothing, a `failure` message naming it with the numbers at every stage before. Stage
+times are measurements, not results: they go to the step's session record (`stage_seconds`), so
+a result stays byte-identical run to run.
 """
 from __future__ import annotations
 
@@ -14,11 +16,13 @@ class StageLog:
 
     def __init__(self) -> None:
         self.stages: list[dict] = []
+        self.seconds: list[float] = []
         self._start = time.perf_counter()
 
     def done(self, name: str, count: int, note: str = "") -> int:
         now = time.perf_counter()
-        self.stages.append({"stage": name, "count": int(count), "seconds": round(now - self._start, 4), "note": note})
+        self.stages.append({"stage": name, "count": int(count), "note": note})
+        self.seconds.append(now - self._start)
         self._start = now
         return count
 
@@ -28,10 +32,10 @@ class StageLog:
         return f"{what} ({counts})"
 
 
-def stage_table(step_stages: list[tuple[str, list[dict]]]) -> str:
-    """A plain-text table of (step name, stages) rows."""
-    lines = [f"{'step':<16}{'stage':<34}{'count':>7}{'seconds':>9}  note"]
-    for step, stages in step_stages:
-        for s in stages:
-            lines.append(f"{step:<16}{s['stage']:<34}{s['count']:>7}{s['seconds']:>9.3f}  {s['note']}".rstrip())
+def stage_table(step_stages: list[tuple[str, list[dict], list[float]]]) -> str:
+    """A plain-text table of (step name, stages, stage seconds) rows."""
+    lines = [f"{'step':<16}{'stage':<38}{'count':>7}{'seconds':>9}  note"]
+    for step, stages, seconds in step_stages:
+        for s, t in zip(stages, seconds):
+            lines.append(f"{step:<16}{s['stage']:<38}{s['count']:>7}{t:>9.3f}  {s['note']}".rstrip())
     return "\n".join(lines)

@@ -41,6 +41,7 @@ class StepContext:
     params: Any
     rng: np.random.Generator
     progress: Progress = no_progress
+    timings: list[float] = dataclasses.field(default_factory=list)  # seconds of the step's stages, for its session record
 
 
 @dataclass(frozen=True)
