@@ -73,7 +73,8 @@ def test_layer_helpers() -> None:
 
 
 def test_online_layers_are_drawn(workbench: Workbench, page: Page) -> None:
-    """The example's three online steps have layers; the exchange grid is on screen (hiding it changes the view)."""
+    """The example's three online steps have layers; the exchange grid is on screen (hiding it, or showing all its free
+    nodes, changes the view)."""
     assert set(ONLINE) <= set(LAYERS)
     layers = workbench.session_layers.layers
     assert not workbench.session_layers.errors, workbench.session_layers.errors
@@ -87,6 +88,12 @@ def test_online_layers_are_drawn(workbench: Workbench, page: Page) -> None:
         assert _until_changed(page, shown) > CHANGED, "hiding the exchange grid changed nothing on screen"
     finally:
         layers["exchange"].visible = True
+    shown = _settled(page)
+    layers["exchange"].shown.value = 100  # the whole free grid, not only its cheapest nodes
+    try:
+        assert _until_changed(page, shown) > CHANGED, "showing every free node changed nothing on screen"
+    finally:
+        layers["exchange"].shown.value = 10
     _settled(page)
 
 

@@ -46,10 +46,13 @@ def layer(workbench: Workbench) -> RoadmapLayer:
 
 
 def _node_in_largest(layer: RoadmapLayer) -> int:
-    """The node of the largest component whose wrists are farthest from the initial configuration's: clearly visible."""
+    """The node of the largest component whose wrists are farthest from the initial configuration's, among those with
+    both wrists in front of the robot and below its head (in the camera's view): clearly visible."""
     roadmap = layer.roadmap
     comp = roadmap.node_component
     nodes = np.flatnonzero(comp == np.argmax(np.bincount(comp)))
+    wrists = roadmap.wrists[nodes]
+    nodes = nodes[np.all((wrists[..., 0] > 0.1) & (wrists[..., 2] < 1.4), axis=1)]
     initial = wrist_positions(layer.scene.robot, layer.scene.q_initial[None])[0]
     return int(nodes[np.argmax(np.linalg.norm(roadmap.wrists[nodes] - initial, axis=2).sum(axis=1))])
 

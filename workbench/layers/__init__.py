@@ -2,12 +2,18 @@
 from __future__ import annotations
 
 from .arms import ArmsLayer
-from .grasps import PickGraspsLayer, PlaceGraspsLayer
 from .base import StepLayer
+from .double_grasps import DoubleGraspsLayer
+from .exchange import ExchangeLayer
+from .grasp_configs import GraspConfigsLayer
+from .grasps import PickGraspsLayer, PlaceGraspsLayer
 from .roadmap import RoadmapLayer
 
 LAYERS: dict[str, type[StepLayer]] = {
     "arms": ArmsLayer,
     "pick_grasps": PickGraspsLayer, "place_grasps": PlaceGraspsLayer,
+    "grasp_configs": GraspConfigsLayer,
+    "exchange": ExchangeLayer,
+    "double_grasps": DoubleGraspsLayer,
     "roadmap": RoadmapLayer,
 }

@@ -7,6 +7,8 @@ from typing import Any
 import numpy as np
 import viser
 
+from planner.errors import RegraspError
+from planner.session import Session
 from planner.task import Scene
 
 from ..rooted import Rooted
@@ -15,7 +17,7 @@ from ..rooted import Rooted
 class StepLayer(Rooted, ABC):
     """Draws one step's result; `update(result)` (re)draws it and fills `poses`: robot configurations worth showing, by label."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Any = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
         super().__init__(server, root)
         self.server = server
         self.scene = scene
@@ -23,7 +25,24 @@ class StepLayer(Rooted, ABC):
         self.session = session  # the drawn Session: a layer reads the earlier steps' results it needs from it
         self.name = root
         self.poses: dict[str, np.ndarray] = {}
+        self.folder: viser.GuiFolderHandle | None = None  # the layer's GUI, if it has one: removed with the layer
+
+    def earlier(self, name: str) -> Any:
+        """An earlier step's result from the drawn session (e.g. the grasp lists that a later step refers to by rank)."""
+        if self.session is None:
+            raise RegraspError(f"{type(self).__name__} needs the session to read step '{name}'")
+        return self.session.result(name)
 
     @abstractmethod
     def update(self, result: Any) -> None:
         """Draw `result`, replacing what was drawn before."""
+
+    def remove_folder(self) -> None:
+        """Take the layer's GUI folder out of the panel (before a redraw builds a new one)."""
+        if self.folder is not None:
+            self.folder.remove()
+            self.folder = None
+
+    def remove(self) -> None:
+        self.remove_folder()
+        super().remove()

@@ -14,6 +14,7 @@ from planner.finger_workspace import hand_workspaces
 from planner.grasps import GraspList, GraspParams, hand_spec_of
 from planner.hand_model import HandModel, load_hand_model
 from planner.object_model import object_model
+from planner.session import Session
 from planner.task import Scene
 
 from ..meshes import matrix_wxyz
@@ -64,9 +65,8 @@ class GraspsLayer(StepLayer):
     placement = "initial"  # or "final": the scene's object pose the list is drawn at
     title = "Grasps"
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None):
-        super().__init__(server, scene, root, workbench)
-        self.folder: viser.GuiFolderHandle | None = None
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+        super().__init__(server, scene, root, workbench, session)
         self.rank: viser.GuiDropdownHandle | None = None
         self.show_spheres: viser.GuiCheckboxHandle | None = None
         self.scores: viser.GuiMarkdownHandle | None = None

@@ -19,6 +19,7 @@ import viser
 from planner.roadmap.build import wrist_positions
 from planner.roadmap.query import QueryResult, RoadmapPlanner
 from planner.roadmap.result import Roadmap, RoadmapParams
+from planner.session import Session
 from planner.task import Scene
 
 from ..notify import error_text
@@ -76,15 +77,14 @@ def frames(robot, path: np.ndarray) -> np.ndarray:
 class RoadmapLayer(StepLayer):
     """The Super Graph in wrist space, a chosen node, and planning to it from the robot's current configuration."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None):
-        super().__init__(server, scene, root, workbench)
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+        super().__init__(server, scene, root, workbench, session)
         self.roadmap: Roadmap | None = None
         self.last_query: QueryResult | None = None
         self.job: threading.Thread | None = None
         self._planner: RoadmapPlanner | None = None
         self._plan_lock = threading.Lock()
         self._animation = 0  # bumped to stop a running animation
-        self.folder: viser.GuiFolderHandle | None = None
 
     # -- drawing ---------------------------------------------------------------------------------
 
