@@ -65,6 +65,22 @@ def _until_changed(page: Page, before: np.ndarray, timeout: float = 15.0) -> flo
     return _changed(_settled(page), before)
 
 
+def _open(wb: Workbench, browser: Browser) -> Page:
+    """A new page on the workbench, once its GUI is up."""
+    page = browser.new_page(viewport=VIEWPORT)
+    page.goto(wb.url)
+    page.get_by_text("Collisions:").wait_for(timeout=60_000)
+    return page
+
+
+def _run_up_to_from_the_gui(wb: Workbench, page: Page, step: str, timeout: float = 240) -> None:
+    """Choose `step` in the session panel, click "Run up to this step" and wait until the step's layer is drawn."""
+    panel = wb.session_panel
+    panel.until.value = step
+    page.get_by_role("button", name="Run up to this step").click()
+    assert _wait_for(lambda: wb.session_layers is not None and step in wb.session_layers.layers, timeout), panel.message.content
+
+
 def _wait_for(condition: Callable[[], bool], timeout: float = 10.0) -> bool:
     end = time.monotonic() + timeout
     while time.monotonic() < end:

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import CHANGED, VIEWPORT, _free_port, _settled, _until_changed, _wait_for
+from test_workbench_browser import (CHANGED, _free_port, _open, _run_up_to_from_the_gui, _settled, _until_changed,
+                                    _wait_for)
 
 from planner.paths import PROJECT_ROOT
 from planner.session import Session
@@ -23,13 +24,6 @@ from workbench.layers.grasp_configs import KEPT_COLOR, REMOVED_COLOR, GraspConfi
 EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
 ONLINE = ("grasp_configs", "exchange", "double_grasps")
 pytestmark = pytest.mark.browser
-
-
-def _open(wb: Workbench, browser: Browser) -> Page:
-    page = browser.new_page(viewport=VIEWPORT)
-    page.goto(wb.url)
-    page.get_by_text("Collisions:").wait_for(timeout=60_000)
-    return page
 
 
 def _robot_to_exchange(wb: Workbench, page: Page, layer: DoubleGraspsLayer) -> None:
@@ -136,13 +130,9 @@ def test_double_grasps_run_from_the_gui_then_shown_at_the_exchange(browser: Brow
         assert "double_grasps" not in wb.session_layers.layers and "exchange" in wb.session_layers.layers
         page = _open(wb, browser)
         try:
-            panel = wb.session_panel
-            panel.until.value = "double_grasps"
-            page.get_by_role("button", name="Run up to this step").click()
-            assert _wait_for(lambda: wb.session_layers is not None and "double_grasps" in wb.session_layers.layers, 240), \
-                panel.message.content
-            assert panel.job is not None
-            panel.job.join(60)
+            _run_up_to_from_the_gui(wb, page, "double_grasps")
+            assert wb.session_panel.job is not None
+            wb.session_panel.job.join(60)
             assert wb.session.finished()[-1] == "double_grasps" and wb.session.folder != folder
             layer = wb.session_layers.layers["double_grasps"]
             result = wb.session.result("double_grasps")

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import CHANGED, VIEWPORT, _free_port, _settled, _until_changed, _wait_for
+from test_workbench_browser import (CHANGED, _free_port, _open, _run_up_to_from_the_gui, _settled, _until_changed,
+                                    _wait_for)
 
 from planner.paths import PROJECT_ROOT
 from planner.session import Session
@@ -19,13 +20,6 @@ from workbench.layers.grasps import GraspsLayer, friction_cones
 pytestmark = pytest.mark.browser
 
 EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
-
-
-def _open(wb: Workbench, browser: Browser) -> Page:
-    page = browser.new_page(viewport=VIEWPORT)
-    page.goto(wb.url)
-    page.get_by_text("Collisions:").wait_for(timeout=60_000)
-    return page
 
 
 def _look_at_object(wb: Workbench, layer: GraspsLayer) -> None:
@@ -110,11 +104,7 @@ def test_grasp_list_computed_from_the_gui_then_a_grasp_selected(browser: Browser
         assert "pick_grasps" not in wb.session_layers.layers
         page = _open(wb, browser)
         try:
-            panel = wb.session_panel
-            panel.until.value = "pick_grasps"
-            page.get_by_role("button", name="Run up to this step").click()
-            assert _wait_for(lambda: wb.session_layers is not None and "pick_grasps" in wb.session_layers.layers, 240), \
-                panel.message.content
+            _run_up_to_from_the_gui(wb, page, "pick_grasps")
             layer = wb.session_layers.layers["pick_grasps"]
             assert wb.session.finished() == ["arms", "pick_grasps"]
             _look_at_object(wb, layer)

@@ -77,7 +77,7 @@ class GraspsLayer(StepLayer):
         self._sphere_handles: list[viser.MeshHandle] = []
 
     def update(self, result: GraspList) -> None:
-        self._remove_gui()
+        self.remove_folder()
         self.result = result
         scene = self.scene
         T = scene.object_initial if self.placement == "initial" else scene.object_final
@@ -163,14 +163,9 @@ class GraspsLayer(StepLayer):
         if self.rank is not None and self.rank_of(self.rank.value) != rank:
             self.rank.value = self.rank_labels(r)[rank]
 
-    def _remove_gui(self) -> None:
-        if self.folder is not None:
-            self.folder.remove()
-        self.folder = self.rank = self.show_spheres = self.scores = None
-
-    def remove(self) -> None:
-        self._remove_gui()
-        super().remove()
+    def remove_folder(self) -> None:
+        super().remove_folder()
+        self.rank = self.show_spheres = self.scores = None
 
 
 class PickGraspsLayer(GraspsLayer):

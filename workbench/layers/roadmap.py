@@ -207,12 +207,6 @@ class RoadmapLayer(StepLayer):
 
     # -- removal ---------------------------------------------------------------------------------
 
-    def remove_gui(self) -> None:
-        self._animation += 1
-        if self.folder is not None:
-            self.folder.remove()
-            self.folder = None
-
     def remove(self) -> None:
-        self.remove_gui()
+        self._animation += 1  # a running animation stops at its next frame
         super().remove()
