@@ -15,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from .reach import approach_direction
-from .robot import Robot
+from .robot import Robot, joint_at
 
 
 @dataclass(frozen=True)
@@ -42,10 +42,9 @@ class ConfigScorer:
         model = robot.model
         self.palm = {a: robot.frame_id(robot.palm_frame(a)) for a in robot.spec.arm_names}
         self.approach = {a: approach_direction(robot, a) for a in robot.spec.arm_names}
-        joint_of = {model.joints[j].idx_q: j for j in range(1, model.njoints)}
-        self.shoulder = {a: joint_of[int(idx[0])] for a, idx in robot.arm_idx.items()}
-        self.wrist = {a: joint_of[int(idx[-1])] for a, idx in robot.arm_idx.items()}
-        self.torso = joint_of[int(robot.torso_idx[0])] if len(robot.torso_idx) else 0
+        self.shoulder = {a: joint_at(model, int(idx[0])) for a, idx in robot.arm_idx.items()}
+        self.wrist = {a: joint_at(model, int(idx[-1])) for a, idx in robot.arm_idx.items()}
+        self.torso = joint_at(model, int(robot.torso_idx[0])) if len(robot.torso_idx) else 0
         pin.forwardKinematics(model, self.data, robot.q_rest)
         self.base = self.data.oMi[self.torso].translation.copy()
         self.rest_wrist_z = {a: float(self.data.oMi[j].translation[2]) for a, j in self.wrist.items()}

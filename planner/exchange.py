@@ -19,7 +19,7 @@ from .hand_placement import ObstacleTest
 from .object_collision import ObjectCollision
 from .reach import grasp_centre
 from .results import array
-from .robot import Robot
+from .robot import Robot, joint_at
 from .stages import StageLog
 from .steps import Step, StepContext
 
@@ -63,7 +63,7 @@ def arm_reach(robot: Robot, arm: str, samples: int, rng: np.random.Generator) ->
     """(the shoulder position at rest, the largest shoulder-to-grasp-centre distance over sampled arm configurations)."""
     model, data = robot.model, robot.model.createData()
     idx = robot.arm_idx[arm]
-    shoulder_joint = next(j for j in range(1, model.njoints) if model.joints[j].idx_q == idx[0])
+    shoulder_joint = joint_at(model, int(idx[0]))
     palm = robot.frame_id(robot.palm_frame(arm))
     offset = grasp_centre(robot, arm)
     pin.forwardKinematics(model, data, robot.q_rest)

@@ -19,8 +19,14 @@ def posed_shapes(hand: HandModel, finger_q: np.ndarray, palm: np.ndarray) -> lis
     return [(shape.geometry, palm @ pose) for shape, pose in hand.shape_poses(finger_q)]
 
 
+def _ensure_aabb(geometry: coal.CollisionGeometry) -> None:
+    """Compute a shape's local box once (shapes are never changed after they are made)."""
+    if geometry.aabb_radius < 0:
+        geometry.computeLocalAABB()
+
+
 def _bounding_sphere(geometry: coal.CollisionGeometry, pose: np.ndarray) -> tuple[np.ndarray, float]:
-    geometry.computeLocalAABB()
+    _ensure_aabb(geometry)
     centre = pose[:3, :3] @ np.asarray(geometry.aabb_center) + pose[:3, 3]
     return centre, float(geometry.aabb_radius)
 
@@ -70,7 +76,7 @@ class ObstacleTest:
 
 def _world_aabb(geometry: coal.CollisionGeometry, pose: np.ndarray) -> np.ndarray:
     """(2, 3): the world box around a posed shape (its local box's corners transformed)."""
-    geometry.computeLocalAABB()
+    _ensure_aabb(geometry)
     lo, hi = np.asarray(geometry.aabb_local.min_), np.asarray(geometry.aabb_local.max_)
     corners = np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
     world = corners @ pose[:3, :3].T + pose[:3, 3]

@@ -137,9 +137,14 @@ def _idx(model: pin.Model, names, spec: RobotSpec, field: str) -> np.ndarray:
     return np.asarray(out, dtype=int)
 
 
+def joint_at(model: pin.Model, i: int) -> int:
+    """The id of the 1-DoF joint at configuration index i."""
+    return next(j for j in range(1, model.njoints) if model.joints[j].idx_q == i)
+
+
 def robot_joint_name(model: pin.Model, i: int) -> str:
     """The name of the 1-DoF joint at configuration index i."""
-    return next(model.names[j] for j in range(1, model.njoints) if model.joints[j].idx_q == i)
+    return model.names[joint_at(model, i)]
 
 
 def build_robot(spec: RobotSpec) -> Robot:

@@ -5,6 +5,7 @@ import io
 import socket
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,8 @@ import pytest
 from PIL import Image
 from playwright.sync_api import Browser, Page
 
-from planner.paths import DEFAULT_TASK
+from planner.paths import DEFAULT_TASK, PROJECT_ROOT
+from planner.session import Session
 from workbench.app import Workbench
 
 pytestmark = pytest.mark.browser
@@ -25,6 +27,7 @@ CHROMIUM_ARGS = [
 ]
 VIEWPORT = {"width": 1024, "height": 720}
 SCENE_WIDTH = 640  # px: the left part of the page, where the 3-D view is not covered by the GUI panel
+EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"  # the example session the tests replay (copied, never written)
 CHANGED = 0.003  # fraction of the view's pixels that must change for a change to count
 
 
@@ -63,6 +66,18 @@ def _until_changed(page: Page, before: np.ndarray, timeout: float = 15.0) -> flo
     while time.monotonic() < end and _changed(_view(page), before) < CHANGED:
         time.sleep(0.3)
     return _changed(_settled(page), before)
+
+
+@contextmanager
+def _example_before(tmp_path: Path, step: str) -> Iterator[Workbench]:
+    """A workbench on a copy of the example session holding only the steps before `step` (closed afterwards)."""
+    folder = tmp_path / f"before-{step}"
+    Session.open(EXAMPLE).branch(folder, before=step)
+    wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=tmp_path)
+    try:
+        yield wb
+    finally:
+        wb.close()
 
 
 def _open(wb: Workbench, browser: Browser) -> Page:

@@ -10,18 +10,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import (CHANGED, _free_port, _open, _run_up_to_from_the_gui, _settled, _until_changed,
+from test_workbench_browser import (CHANGED, EXAMPLE, _example_before, _free_port, _open, _run_up_to_from_the_gui, _settled, _until_changed,
                                     _wait_for)
 
-from planner.paths import PROJECT_ROOT
-from planner.session import Session
 from workbench.app import Workbench
 from workbench.layers import LAYERS
 from workbench.layers.double_grasps import DoubleGraspsLayer, pair_labels
 from workbench.layers.exchange import ExchangeLayer, cost_colors, wrist_routes
 from workbench.layers.grasp_configs import KEPT_COLOR, REMOVED_COLOR, GraspConfigsLayer, grasp_colors
 
-EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
 ONLINE = ("grasp_configs", "exchange", "double_grasps")
 pytestmark = pytest.mark.browser
 
@@ -123,10 +120,8 @@ def test_exchange_button_poses_the_robot_at_q_exch(workbench: Workbench, page: P
 
 def test_double_grasps_run_from_the_gui_then_shown_at_the_exchange(browser: Browser, tmp_path: Path) -> None:
     """A session finished up to `exchange`: "Run up to this step" on double_grasps draws its layer; "exchange" poses the robot."""
-    folder = tmp_path / "until-exchange"
-    Session.open(EXAMPLE).branch(folder, before="double_grasps")
-    wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=tmp_path)
-    try:
+    with _example_before(tmp_path, "double_grasps") as wb:
+        folder = wb.session.folder
         assert "double_grasps" not in wb.session_layers.layers and "exchange" in wb.session_layers.layers
         page = _open(wb, browser)
         try:
@@ -142,5 +137,3 @@ def test_double_grasps_run_from_the_gui_then_shown_at_the_exchange(browser: Brow
             assert np.allclose(wb.q, result.q_exch[0])
         finally:
             page.close()
-    finally:
-        wb.close()

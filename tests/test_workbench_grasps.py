@@ -8,18 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import (CHANGED, _free_port, _open, _run_up_to_from_the_gui, _settled, _until_changed,
+from test_workbench_browser import (CHANGED, EXAMPLE, _example_before, _free_port, _open, _run_up_to_from_the_gui, _settled, _until_changed,
                                     _wait_for)
 
-from planner.paths import PROJECT_ROOT
 from planner.session import Session
 from workbench.app import Workbench
 from workbench.layers import LAYERS
 from workbench.layers.grasps import GraspsLayer, friction_cones
 
 pytestmark = pytest.mark.browser
-
-EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
 
 
 def _look_at_object(wb: Workbench, layer: GraspsLayer) -> None:
@@ -97,10 +94,7 @@ def test_example_grasp_lists_are_drawn_and_a_rank_is_chosen_in_the_browser(brows
 
 def test_grasp_list_computed_from_the_gui_then_a_grasp_selected(browser: Browser, tmp_path: Path) -> None:
     """A session with only `arms`: "Run up to this step" on pick_grasps (progress bar), then a rank chosen in the browser."""
-    folder = tmp_path / "arms-only"
-    Session.open(EXAMPLE).branch(folder, before="pick_grasps")
-    wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=tmp_path)
-    try:
+    with _example_before(tmp_path, "pick_grasps") as wb:
         assert "pick_grasps" not in wb.session_layers.layers
         page = _open(wb, browser)
         try:
@@ -116,5 +110,3 @@ def test_grasp_list_computed_from_the_gui_then_a_grasp_selected(browser: Browser
             assert page.get_by_role("cell", name=eps, exact=True).count() > 0
         finally:
             page.close()
-    finally:
-        wb.close()

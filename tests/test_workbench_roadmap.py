@@ -7,15 +7,13 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import (CHANGED, VIEWPORT, _changed, _free_port, _settled,
+from test_workbench_browser import (CHANGED, EXAMPLE, _changed, _free_port, _open, _settled,
                                     _until_changed, _view, _wait_for)
 
-from planner.paths import PROJECT_ROOT
 from planner.roadmap.build import wrist_positions
 from workbench.app import Workbench
 from workbench.layers.roadmap import JOINT_STEP, RoadmapLayer
 
-EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
 pytestmark = pytest.mark.browser
 
 
@@ -30,9 +28,7 @@ def workbench(tmp_path_factory) -> Iterator[Workbench]:
 
 @pytest.fixture(scope="module")
 def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
-    page = browser.new_page(viewport=VIEWPORT)
-    page.goto(workbench.url)
-    page.get_by_text("Collisions:").wait_for(timeout=60_000)
+    page = _open(workbench, browser)
     yield page
     page.close()
 

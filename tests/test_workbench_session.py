@@ -13,18 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import (CHANGED, VIEWPORT, _free_port, _settled, _until_changed,
+from test_workbench_browser import (CHANGED, EXAMPLE, VIEWPORT, _free_port, _open, _settled, _until_changed,
                                     _view, _wait_for)
 
 from planner.errors import RegraspError
-from planner.paths import DEFAULT_TASK, PROJECT_ROOT
+from planner.paths import DEFAULT_TASK
 from planner.pipeline import PIPELINE
 from planner.session import MANIFEST, Session
 from workbench.app import Workbench
 from workbench.export import export_html
 from workbench.layers import LAYERS
 
-EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
 MAX_HTML_BYTES = 30_000_000
 
 
@@ -64,9 +63,7 @@ def workbench(sessions_dir: Path, example: Session) -> Iterator[Workbench]:
 
 @pytest.fixture(scope="module")
 def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
-    page = browser.new_page(viewport=VIEWPORT)
-    page.goto(workbench.url)
-    page.get_by_text("Collisions:").wait_for(timeout=60_000)
+    page = _open(workbench, browser)
     yield page
     page.close()
 
