@@ -26,14 +26,14 @@ class IKResult:
 
 
 class ArmIK:
-    """IK for the palm frames of one arm or several (a name or a tuple), with the torso; holds its own pinocchio Data
-    (one per thread)."""
+    """IK for the palm frames of one arm or several (a name or a tuple), with the torso unless `torso=False` (an arm
+    that must not move what the other hand holds); holds its own pinocchio Data (one per thread)."""
 
-    def __init__(self, robot: Robot, arms: str | tuple[str, ...]):
+    def __init__(self, robot: Robot, arms: str | tuple[str, ...], torso: bool = True):
         arms = (arms,) if isinstance(arms, str) else tuple(arms)
         self.robot = robot
         self.frames = [robot.frame_id(robot.palm_frame(a)) for a in arms]
-        self.idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in arms])
+        self.idx = np.concatenate(([robot.torso_idx] if torso else []) + [robot.arm_idx[a] for a in arms])
         self.data = robot.model.createData()
 
     def palm(self, q: np.ndarray, k: int = 0) -> pin.SE3:

@@ -39,6 +39,7 @@ class CollisionParams:
     env_padding: float = 0.01  # m: robot-obstacle pairs count as colliding closer than this
     self_padding: float = 0.0  # m: robot-robot pairs count as colliding closer than this
     seed: int = 0
+    object_padding: float = 0.0  # m: robot-object pairs (subset 'object', when the model has the object) likewise
 
 
 @dataclass(frozen=True)
@@ -250,6 +251,8 @@ class CollisionChecker:
             if self.cm.params.self_padding:
                 for k in self.cm.subsets["self"]:
                     gd.collisionRequests[int(k)].security_margin = self.cm.params.self_padding
+            for k in self.cm.subsets.get("object", ()):
+                gd.collisionRequests[int(k)].security_margin = self.cm.params.object_padding
             self._gdata[subset] = gd
             self._managers[subset] = pin.BroadPhaseManager_SSaPCollisionManager(self.model, self.cm.geometry, gd)
         return self._gdata[subset], self._managers[subset]

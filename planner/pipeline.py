@@ -1,12 +1,12 @@
 """The pipeline: every step, in order. A new step plugs in by adding its STEP here."""
 from __future__ import annotations
 
-from . import arms, double_grasps, exchange, grasp_configs, grasps, roadmap
+from . import arms, double_grasps, exchange, grasp_configs, grasps, motion, roadmap
 from .errors import RegraspError
 from .steps import Step
 
 PIPELINE: tuple[Step, ...] = (arms.STEP, grasps.PICK_STEP, grasps.PLACE_STEP, grasp_configs.STEP, exchange.STEP, double_grasps.STEP,
-                              roadmap.STEP)
+                              roadmap.STEP, motion.STEP)
 
 
 def canonical(name: str) -> str:

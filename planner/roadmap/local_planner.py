@@ -31,7 +31,9 @@ def geometry_radii(cm: CollisionModel) -> np.ndarray:
     model = cm.robot.model
     axes = _axes(model)
     radii = np.zeros((len(cm.geometry.geometryObjects), model.nq))
-    for g, obj in enumerate(cm.geometry.geometryObjects[: cm.n_robot_geoms]):
+    for g, obj in enumerate(cm.geometry.geometryObjects):
+        if obj.parentJoint == 0:
+            continue  # fixed in the world (obstacles, a static object): no joint moves it
         geom = obj.geometry
         if hasattr(geom, "points"):
             pts = np.asarray(geom.points()) @ obj.placement.rotation.T + obj.placement.translation
@@ -77,10 +79,11 @@ def van_der_corput(n: int) -> np.ndarray:
     return np.asarray(order, dtype=float) / (n - 1)
 
 
-def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float) -> np.ndarray:
+def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, object_clearance: float = 0.0) -> np.ndarray:
     """(n_pairs,) p - c per pair: how much closer than its padding a pair may come between checks."""
     out = np.full(len(cm.geometry.collisionPairs), cm.params.self_padding - self_clearance)
     out[cm.subsets["env"]] = cm.params.env_padding - env_clearance
+    out[cm.subsets.get("object", [])] = cm.params.object_padding - object_clearance
     if np.any(out <= 0):
         raise ValueError("each padding must exceed the clearance it guarantees")
     return out
@@ -99,23 +102,29 @@ def _maximal_rows(rows: np.ndarray) -> np.ndarray:
 class SegmentChecker:
     """Checks configurations and straight segments against named pair subsets (one per process)."""
 
-    def __init__(self, cm: CollisionModel, env_clearance: float, self_clearance: float = 0.0):
+    def __init__(self, cm: CollisionModel, env_clearance: float, self_clearance: float = 0.0, object_clearance: float = 0.0):
         self.cm = cm
         self.checker = cm.checker()
         radii = geometry_radii(cm)
         first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
         second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
         sweep = relative_joints(cm) * (radii[first] + radii[second])
-        per_pair = sweep / (2.0 * allowances(cm, env_clearance, self_clearance))[:, None]
-        self._weights = {name: _maximal_rows(per_pair[idx]) for name, idx in cm.subsets.items()}
+        self._per_pair = sweep / (2.0 * allowances(cm, env_clearance, self_clearance, object_clearance))[:, None]
+        self._weights: dict[str, np.ndarray] = {}
 
     @property
     def checks(self) -> int:
         return self.checker.checks
 
+    def weights(self, subset: str) -> np.ndarray:
+        """(rows, nq) the subset's displacement weights per joint (computed once per subset)."""
+        if subset not in self._weights:
+            self._weights[subset] = _maximal_rows(self._per_pair[self.cm.subsets[subset]])
+        return self._weights[subset]
+
     def steps(self, qa: np.ndarray, qb: np.ndarray, subset: str) -> np.ndarray:
         """Configurations checked on each segment qa[i] -> qb[i] (vectorised; both ends included)."""
-        sweep = np.abs(np.atleast_2d(qb) - np.atleast_2d(qa)) @ self._weights[subset].T
+        sweep = np.abs(np.atleast_2d(qb) - np.atleast_2d(qa)) @ self.weights(subset).T
         return np.ceil(sweep.max(axis=1, initial=0.0)).astype(int) + 1
 
     def free(self, q: np.ndarray, subset: str) -> bool:

@@ -1,0 +1,255 @@
+"""The four phases of the task (paper V-B) as pieces: transit motions on the Super Graph and contact motions.
+
+Grasp: transit to the pre-grasp (the picking hand backed off along its approach direction, fingers
+open), the fingers to their pre-shape, a straight approach, the fingers closing. Carry: the object
+lifted off its support, transit to the exchange with the placing hand at its pre-grasp, its approach
+and closing, then the picking hand opening and retreating. Place: transit with the placing hand to
+above the final placement, set down, open, retreat. Rest: transit to the final configuration.
+Straight hand motions are IK waypoints of the arm and the torso; while the other hand holds the
+object, its palm is held still by the same IK, so the object does not move. Every piece is checked with the validity of its situation; a piece that fails
+raises `PieceFailed` naming the phase and the part.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..arm_ik import ArmIK
+from ..collision import CollisionModel
+from ..geometry import coal_mesh, transform3s
+from ..reach import approach_direction
+from ..task import Scene
+from .graph import MotionGraph
+from .result import PHASES
+from .situation import Situation, fingertip_geometries, situation_model
+from .space import JointSpace
+from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
+from .validity import Profile, Validity, make_validity
+
+
+
+@dataclass(frozen=True)
+class Piece:
+    """A checked polyline of one phase, with the object's situation along it."""
+
+    phase: int
+    part: str
+    path: np.ndarray  # (k, nq), k >= 2
+    situation: Situation
+
+
+class PieceFailed(Exception):
+    def __init__(self, phase: int, part: str, why: str):
+        super().__init__(f"{PHASES[phase]} phase, {part}: {why}")
+        self.phase, self.part = phase, part
+
+
+@dataclass(frozen=True)
+class HandGrasp:
+    """One hand's grasp: its arm, the palm pose in the object frame, the finger values and the touching fingers."""
+
+    arm: str
+    palm_in_object: np.ndarray
+    fingers: np.ndarray
+    touching: list
+
+
+class PhasePlanner:
+    """Builds the pieces of one double grasp; keeps per-phase Table I figures in `stats`."""
+
+    def __init__(self, scene: Scene, cm: CollisionModel, graph: MotionGraph, transit: Profile, contact: Profile,
+                 params, rng: np.random.Generator, baseline: bool):
+        self.scene, self.robot, self.cm, self.graph = scene, scene.robot, cm, graph
+        self.transit_profile, self.contact_profile, self.p, self.rng, self.baseline = transit, contact, params, rng, baseline
+        self.shape = coal_mesh(scene.object_mesh)
+        self.data = self.robot.model.createData()
+        self.stats = [TransitStats() for _ in PHASES]
+        self.transit_params = TransitParams(params.connections, params.max_searches, params.max_reconnections, params.rrt_time,
+                                            params.shortcut_attempts)
+        robot = self.robot
+        self.transit_idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
+        self.open = robot.q_rest
+
+    # ----- kinematics
+    def palm(self, q: np.ndarray, arm: str) -> np.ndarray:
+        pin.framesForwardKinematics(self.robot.model, self.data, q)
+        return self.data.oMf[self.robot.frame_id(self.robot.palm_frame(arm))].homogeneous.copy()
+
+    def _ik(self, q: np.ndarray, arm: str, target: np.ndarray, keep: str | None, tol: float = 1e-3,
+            damping: float = 1e-4) -> np.ndarray | None:
+        """q with the torso and the arm moved so its palm is at target; the palm of `keep` (a hand holding the object)
+        stays where it is. None when IK misses."""
+        arms, targets = (arm,), [target]
+        if keep is not None:
+            arms, targets = (arm, keep), [target, self.palm(q, keep)]
+        result = ArmIK(self.robot, arms).solve(np.array(targets), q, 60, tol, 10 * tol, damping=damping, stall=20)
+        return result.q if result.within(tol, 10 * tol) else None
+
+    def refine(self, q: np.ndarray, arm: str, target: np.ndarray, keep: str | None, phase: int, part: str) -> np.ndarray:
+        """q with the palm of `arm` at target to 0.1 mm / 1 mrad (the double grasps hold 2 mm), `keep`'s palm still."""
+        found = self._ik(q, arm, target, keep, 1e-4, damping=1e-9)
+        if found is None:
+            raise PieceFailed(phase, part, "the arm cannot put its palm exactly at the grasp")
+        return found
+
+    def straight(self, q: np.ndarray, arm: str, offset: np.ndarray, keep: str | None, phase: int, part: str) -> np.ndarray:
+        """IK waypoints moving the arm's palm by a world offset in a straight line, `keep`'s palm still: (steps+1, nq)."""
+        t = time.perf_counter()
+        start = self.palm(q, arm)
+        out = [q]
+        for s in np.linspace(0.0, 1.0, self.p.straight_steps + 1)[1:]:
+            target = start.copy()
+            target[:3, 3] += s * offset
+            nxt = self._ik(out[-1], arm, target, keep)
+            if nxt is None:
+                raise PieceFailed(phase, part, f"the arm cannot move its palm {np.linalg.norm(offset):.3f} m in a straight line")
+            out.append(nxt)
+        self.stats[phase].seconds_contact += time.perf_counter() - t
+        return np.array(out)
+
+    def retreat(self, q: np.ndarray, arm: str, keep: str | None, hover: bool, phase: int, part: str) -> np.ndarray:
+        """IK polyline from q (the palm at a grasp) backing off along the approach direction, then rising by the lift
+        height when `hover` (the object rests on a support there, so the hand leaves upwards)."""
+        path = self.straight(q, arm, self.backoff(q, arm), keep, phase, part)
+        if hover:
+            path = np.concatenate([path, self.straight(path[-1], arm, np.array([0.0, 0.0, self.p.lift]), keep, phase, part)[1:]])
+        return path
+
+    def backoff(self, q: np.ndarray, arm: str) -> np.ndarray:
+        """World offset that backs the arm's palm off along its approach direction by the pre-grasp distance."""
+        palm = self.palm(q, arm)
+        return -self.p.pregrasp_distance * (palm[:3, :3] @ approach_direction(self.robot, arm))
+
+    def with_fingers(self, q: np.ndarray, arm: str, values: np.ndarray) -> np.ndarray:
+        q = q.copy()
+        q[self.robot.hand_idx[arm]] = values
+        return q
+
+    def preshape(self, grasp: HandGrasp) -> np.ndarray:
+        """Finger values between the grasp and the open hand (the pre-shape fraction of the way open)."""
+        open_ = self.open[self.robot.hand_idx[grasp.arm]]
+        return grasp.fingers + self.p.preshape * (open_ - grasp.fingers)
+
+    # ----- validity
+    def validity(self, situation: Situation, profile: Profile, q: np.ndarray, moving: np.ndarray) -> Validity:
+        """Validity of a situation over the pairs the coordinates `moving` change; the hands not at the roadmap's open
+        values at q are those whose pairs 'changed'."""
+        moved = tuple(a for a in self.robot.spec.arm_names
+                      if not np.allclose(q[self.robot.hand_idx[a]], self.open[self.robot.hand_idx[a]]))
+        return make_validity(situation_model(self.cm, self.shape, situation, moved, moving), profile, "moving")
+
+    def contact(self, phase: int, part: str, path: np.ndarray, situation: Situation) -> Piece:
+        """A short motion near the object, checked with the contact profile."""
+        t = time.perf_counter()
+        moving = np.flatnonzero(np.ptp(path, axis=0) > 0)
+        ok = self.validity(situation, self.contact_profile, path[0], moving).path_valid(path)
+        self.stats[phase].seconds_contact += time.perf_counter() - t
+        if not ok:
+            raise PieceFailed(phase, part, "collides (contact profile)")
+        return Piece(phase, part, np.asarray(path), situation)
+
+    def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
+        """The hand's fingers moving to `values` (nothing when they are there)."""
+        target = self.with_fingers(q, arm, values)
+        if np.allclose(target, q):
+            return []
+        return [self.contact(phase, part, np.stack([q, target]), situation)]
+
+    def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation) -> Piece:
+        """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline)."""
+        robot = self.robot
+        space = JointSpace.of(robot.lower, robot.upper, self.transit_idx, q_start)
+        if not space.holds(q_goal):
+            raise ValueError("transit ends must agree on every joint outside the torso and arms")
+        full = self.validity(situation, self.transit_profile, q_start, self.transit_idx)
+        for name, q in (("start", q_start), ("goal", q_goal)):
+            if not full.state_valid(q):
+                raise PieceFailed(phase, "transit", f"its {name} configuration collides (transit profile)")
+        stats = self.stats[phase]
+        try:
+            if self.baseline:
+                path = rrt_transit(space, full, q_start, q_goal, self.transit_params, self.rng, stats)
+            else:
+                path = LazyTransit(self.graph, space, full.on("changed"), full, self.transit_params, self.rng, stats).query(q_start, q_goal)
+        except TransitFailed as exc:
+            raise PieceFailed(phase, "transit", str(exc)) from exc
+        t = time.perf_counter()
+        path = shortcut(path, full, self.rng, self.transit_params.shortcut_attempts)
+        stats.seconds_shortcut += time.perf_counter() - t
+        return Piece(phase, "transit", path, situation)
+
+    # ----- the task
+    def plan(self, q_grasp: np.ndarray, q_exch: np.ndarray, q_place: np.ndarray, a: HandGrasp, b: HandGrasp) -> list[Piece]:
+        """Every piece from q_initial to q_final through the double grasp (a: the picking hand, b: the placing hand)."""
+        scene, p = self.scene, self.p
+        oi, of = scene.object_initial, scene.object_final
+        open_a, open_b = (self.open[self.robot.hand_idx[h.arm]] for h in (a, b))
+        up = np.array([0.0, 0.0, p.lift])
+        pieces: list[Piece] = []
+
+        # exact grasps, so the object's pose is continuous where it changes hands
+        g_a = np.linalg.inv(oi) @ self.palm(q_grasp, a.arm)
+        x = self.palm(q_exch, a.arm) @ np.linalg.inv(g_a)
+        q_exch = self.refine(q_exch, b.arm, x @ b.palm_in_object, a.arm, 1, "exchange")
+        g_b = np.linalg.inv(x) @ self.palm(q_exch, b.arm)
+        q_place = self.refine(q_place, b.arm, of @ g_b, None, 2, "place")
+        static_i, static_f = Situation(None, oi), Situation(None, of)
+        held_a, held_b = Situation(a.arm, g_a), Situation(b.arm, g_b)
+        tips_a = fingertip_geometries(self.cm, a.arm, a.touching)
+        tips_b = fingertip_geometries(self.cm, b.arm, b.touching)
+        support_i, support_f = self.supports(oi), self.supports(of)
+
+        # Grasp
+        pre_a = self.preshape(a)
+        approach = self.retreat(self.with_fingers(q_grasp, a.arm, pre_a), a.arm, None, True, 0, "pre-grasp")[::-1]
+        q_pre = self.with_fingers(approach[0], a.arm, open_a)
+        pieces.append(self.transit(0, scene.q_initial, q_pre, static_i))
+        pieces += self.fingers(0, "pre-shape", q_pre, a.arm, pre_a, static_i)
+        pieces.append(self.contact(0, "approach", approach, static_i))
+        pieces += self.fingers(0, "closing", approach[-1], a.arm, a.fingers, Situation(None, oi, tips_a))
+
+        # Carry
+        lift = self.straight(pieces[-1].path[-1], a.arm, up, None, 1, "lift")
+        pieces.append(self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i)))
+        pre_b = self.preshape(b)
+        q_x = self.with_fingers(q_exch, a.arm, a.fingers)
+        approach_b = self.retreat(self.with_fingers(q_x, b.arm, pre_b), b.arm, a.arm, False, 1, "exchange pre-grasp")[::-1]
+        q_pre_b = self.with_fingers(approach_b[0], b.arm, open_b)
+        pieces.append(self.transit(1, lift[-1], q_pre_b, held_a))
+        pieces += self.fingers(1, "pre-shape", q_pre_b, b.arm, pre_b, held_a)
+        pieces.append(self.contact(1, "approach", approach_b, held_a))
+        pieces += self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
+        released = Situation(b.arm, g_b, tips_a)
+        pieces += self.fingers(1, "opening", pieces[-1].path[-1], a.arm, pre_a, released)
+        retreat_a = self.retreat(pieces[-1].path[-1], a.arm, b.arm, False, 1, "retreat")
+        pieces.append(self.contact(1, "retreat", retreat_a, released))
+        pieces += self.fingers(1, "opening", retreat_a[-1], a.arm, open_a, held_b)
+
+        # Place
+        q_down = self.with_fingers(q_place, a.arm, open_a)
+        lower = self.straight(q_down, b.arm, up, None, 2, "above the placement")[::-1]
+        pieces.append(self.transit(2, pieces[-1].path[-1], lower[0], held_b))
+        pieces.append(self.contact(2, "set-down", lower, Situation(b.arm, g_b, (), support_f)))
+        let_go = Situation(None, of, tips_b)
+        pieces += self.fingers(2, "opening", lower[-1], b.arm, pre_b, let_go)
+        retreat_b = self.retreat(pieces[-1].path[-1], b.arm, None, True, 2, "retreat")
+        pieces.append(self.contact(2, "retreat", retreat_b, let_go))
+        pieces += self.fingers(2, "opening", retreat_b[-1], b.arm, open_b, static_f)
+
+        # Rest
+        pieces.append(self.transit(3, pieces[-1].path[-1], scene.q_final, static_f))
+        return pieces
+
+    def supports(self, pose: np.ndarray) -> tuple[str, ...]:
+        """Obstacles within 5 mm of the object at a placement: what it rests on."""
+        out = []
+        req, res = coal.DistanceRequest(), coal.DistanceResult()
+        for ob in self.scene.environment:
+            res.clear()
+            if coal.distance(self.shape, transform3s(pose), ob.coal_shape(), transform3s(ob.pose), req, res) < 0.005:
+                out.append(ob.name)
+        return tuple(out)

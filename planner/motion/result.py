@@ -1,0 +1,66 @@
+"""The motion step's parameters and result: one sampled trajectory from q_initial to q_final, and Table I per phase."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..results import array
+
+PHASES = ("Grasp", "Carry", "Place", "Rest")
+
+
+@dataclass(frozen=True)
+class MotionParams:
+    planner: str = "roadmap"  # 'roadmap' (Super Graph, lazy revalidation, RRT reconnection) or 'rrt' (RRTConnect alone: the baseline)
+    pregrasp_distance: float = 0.08  # m: a hand backs off this far along its approach direction before it approaches
+    lift: float = 0.06  # m: the object is lifted off and set down vertically by this much
+    preshape: float = 1.0  # fingers before an approach: this fraction of the way from the grasp to the open hand
+    straight_steps: int = 4  # IK waypoints on each straight hand motion
+    max_velocity: float = 1.0  # rad/s: joint speeds are capped here (and by the robot's own limits)
+    max_acceleration: float = 2.0  # rad/s^2
+    rate: float = 30.0  # Hz: the trajectory's sampling rate
+    connections: int = 8  # transit: graph nodes each end is joined to
+    max_searches: int = 60  # transit: graph searches after invalidations before reconnecting
+    max_reconnections: int = 4  # transit: RRTConnect calls per query
+    rrt_time: float = 30.0  # s: limit of one RRTConnect call
+    shortcut_attempts: int = 24  # random shortcuts per transit
+    max_double_grasps: int = 6  # double grasps tried, best first
+    transit_env_padding: float = 0.02  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's)
+    transit_self_padding: float = 0.008  # m: robot-robot and robot-object pairs likewise
+    contact_env_padding: float = 0.008  # m: contact motions (approach, closing, lift ...) keep obstacles this far at checks
+    contact_env_clearance: float = 0.004  # m: ... and this far between checks
+    contact_penetration: float = 0.001  # m: hand-object pairs touch at most (0 at checks, this deep between checks)
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A trajectory sampled at `rate`: time, configuration, phase (0..3: Grasp, Carry, Place, Rest), the object's world
+    pose and which arm holds it (-1: none), each wrist's position; `keyframes` are the samples at q_initial, q_grasp,
+    q_exch, q_place and q_final. `phases` holds Table I's counts per phase (seconds are in the session record)."""
+
+    planner: str
+    double_grasp: int  # rank of the double grasp used (-1 when none worked)
+    tried: list  # per double grasp tried, best first: '' if used, else why it failed
+    phases: list  # per phase: nodes added planning / validating, edges invalidated, RRT calls, searches, length, duration
+    arms: list  # arm names, the order of `holder` and `wrists`
+    resolution: dict  # the transit and contact profiles
+    stages: list
+    failure: str
+    t: np.ndarray = array("float64", ("n",))
+    q: np.ndarray = array("float64", ("n", "nq"))
+    phase: np.ndarray = array("int8", ("n",))
+    object_pose: np.ndarray = array("float64", ("n", 4, 4))
+    holder: np.ndarray = array("int8", ("n",))
+    wrists: np.ndarray = array("float64", ("n", 2, 3))
+    keyframes: np.ndarray = array("int64", (5,))
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1]) if len(self.t) else 0.0
+
+    def stats(self) -> dict:
+        return {"planner": self.planner, "double_grasp": self.double_grasp, "samples": int(len(self.t)),
+                "duration": round(self.duration, 3),
+                "path_length": round(sum(p["path_length"] for p in self.phases), 3) if self.phases else 0.0,
+                **({"failure": self.failure} if self.failure else {})}

@@ -1,0 +1,106 @@
+"""The object in the robot's collision model during a motion: static at a pose, or carried by a hand.
+
+A `Situation` says where the object is (static at a world pose, or attached to an arm's palm by a
+grasp: world pose = palm pose · grasp⁻¹), which robot geometries may touch it (the fingertips that
+close on it or let it go) and which obstacles it may touch (its support while it is lifted off or
+set down). `situation_model` adds the object to a copy of the robot + environment model as one
+more geometry: static, it is checked against every moving robot link; carried, it hangs from the
+palm's joint (so the local planner's displacement bound covers its points too) and is checked
+against the obstacles and every robot link but the holding hand's, whose pose relative to the
+object stays fixed while it is carried (it was checked when the grasp was made).
+
+Subsets: 'object' (robot–object pairs, padded by the model's object padding), the object–obstacle
+pairs join 'env'; of the pairs a motion can change (those whose relative pose depends on a moving
+joint), 'moving' is all of them and 'changed' what the offline roadmap did not check: the object's
+pairs and every pair of a hand whose fingers are not at the roadmap's hold configuration.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..collision import CollisionModel
+from ..geometry import se3
+from ..roadmap.decomposition import relative_joints
+
+OBJECT = "object"
+
+
+@dataclass(frozen=True, eq=False)
+class Situation:
+    """Where the object is: held by `holder` with palm-in-object `pose`, or static at world `pose` (holder None)."""
+
+    holder: str | None
+    pose: np.ndarray
+    touching: tuple[str, ...] = ()  # robot geometry names whose contact with the object is allowed
+    support: tuple[str, ...] = ()  # obstacle names the object may touch (lifted off / set down)
+
+    def object_pose(self, palm: np.ndarray) -> np.ndarray:
+        """The object's world pose given the holder's palm pose (ignored when static)."""
+        return self.pose if self.holder is None else palm @ np.linalg.inv(self.pose)
+
+
+def fingertip_geometries(cm: CollisionModel, arm: str, fingers: list[str]) -> tuple[str, ...]:
+    """Names of the geometries on the last link of each named finger of an arm's hand (where its contact is)."""
+    robot = cm.robot
+    hand = robot.spec.arm(arm).hand
+    joints = {robot.model.frames[robot.frame_id(hand.prefixed(f.tip_frame))].parentJoint
+              for f in hand.fingers if f.name in fingers}
+    return tuple(o.name for o in cm.geometry.geometryObjects[: cm.n_robot_geoms] if o.parentJoint in joints)
+
+
+def finger_geometries(cm: CollisionModel, arm: str) -> np.ndarray:
+    """Indices of the robot geometries moved by an arm's finger joints."""
+    model = cm.robot.model
+    fingers = set(cm.robot.hand_idx[arm].tolist())
+    return np.array([g for g, o in enumerate(cm.geometry.geometryObjects[: cm.n_robot_geoms])
+                     if o.parentJoint > 0 and model.joints[o.parentJoint].idx_q in fingers], dtype=np.int64)
+
+
+def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation: Situation,
+                    moved_hands: tuple[str, ...], moving: np.ndarray) -> CollisionModel:
+    """A copy of `cm` with the object in `situation` and the subsets 'object', 'changed' and 'moving' (see the module):
+    'moving' and 'changed' keep only the pairs whose relative pose the configuration indices `moving` change."""
+    robot = cm.robot
+    gm = cm.geometry.copy()
+    objs = gm.geometryObjects
+    n_geoms = len(objs)
+    env = [e for e in range(cm.n_robot_geoms, n_geoms) if objs[e].name.removeprefix("env/") not in situation.support]
+    skip = set(situation.touching)
+    if situation.holder is None:
+        gm.addGeometryObject(pin.GeometryObject(OBJECT, 0, 0, se3(situation.pose), shape))
+        robot_partners = [g for g in range(cm.n_robot_geoms) if objs[g].parentJoint > 0 and objs[g].name not in skip]
+        env_partners = []
+    else:
+        palm = robot.model.frames[robot.frame_id(robot.palm_frame(situation.holder))]
+        placement = palm.placement.homogeneous @ np.linalg.inv(situation.pose)
+        gm.addGeometryObject(pin.GeometryObject(OBJECT, palm.parentJoint, 0, se3(placement), shape))
+        hand = f"{situation.holder}_hand"
+        robot_partners = [g for g in range(cm.n_robot_geoms) if cm.parts[g] != hand and objs[g].name not in skip]
+        env_partners = env
+    o = n_geoms
+    n_pairs = len(gm.collisionPairs)
+    for g in env_partners:
+        gm.addCollisionPair(pin.CollisionPair(g, o))
+    for g in robot_partners:
+        gm.addCollisionPair(pin.CollisionPair(g, o))
+    new_env = np.arange(n_pairs, n_pairs + len(env_partners))
+    new_robot = np.arange(n_pairs + len(env_partners), len(gm.collisionPairs))
+    moved = np.concatenate([finger_geometries(cm, arm) for arm in moved_hands] + [np.zeros(0, np.int64)])
+    first = np.array([cp.first for cp in gm.collisionPairs[:n_pairs]], dtype=int)
+    second = np.array([cp.second for cp in gm.collisionPairs[:n_pairs]], dtype=int)
+    hand_pairs = np.flatnonzero(np.isin(first, moved) | np.isin(second, moved))
+    new = np.arange(n_pairs, len(gm.collisionPairs))
+    subsets = {**cm.subsets,
+               "all": np.concatenate([cm.subsets["all"], new]),
+               "env": np.concatenate([cm.subsets["env"], new_env]),
+               "object": new_robot}
+    out = dataclasses.replace(cm, geometry=gm, subsets=subsets)
+    changes = relative_joints(out)[:, moving].any(axis=1)
+    subsets["moving"] = np.flatnonzero(changes)
+    subsets["changed"] = np.concatenate([hand_pairs, new])[changes[np.concatenate([hand_pairs, new])]]
+    return out

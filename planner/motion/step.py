@@ -1,0 +1,142 @@
+"""The motion step (paper V-B): the whole task as one trajectory, the double grasps tried best first.
+
+Each double grasp is planned phase by phase (phases.py); the first whose every piece is valid is
+timed (timing.py) and sampled at a fixed rate. Measurements (seconds per phase and part) go to the
+step's session record, never into the result, so the result depends on the inputs and the seed only.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from ..collision import build_collision_model
+from ..double_grasps import DoubleGrasps
+from ..grasps import GraspList
+from ..roadmap.result import Roadmap
+from ..steps import Progress, Step, StepContext, no_progress
+from ..task import Scene
+from .graph import MotionGraph
+from .phases import HandGrasp, PhasePlanner, Piece, PieceFailed
+from .result import PHASES, Motion, MotionParams
+from .timing import sample_polyline
+from .validity import Profile, transit_profile
+
+PLANNERS = ("roadmap", "rrt")
+
+
+def contact_profile(p: MotionParams) -> Profile:
+    """The paddings of the motions that touch the object (see validity.py)."""
+    return Profile("contact", p.contact_env_padding, p.contact_env_clearance, 0.0, -p.contact_penetration, 0.0,
+                   -p.contact_penetration)
+
+
+def hand_grasp(grasps: GraspList, rank: int) -> HandGrasp:
+    return HandGrasp(grasps.hand, grasps.hand_pose[rank], grasps.finger_q[rank],
+                     [f for f, m in zip(grasps.fingers, grasps.contact_mask[rank]) if m])
+
+
+def plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps, roadmap: Roadmap, p: MotionParams,
+                rng: np.random.Generator, progress: Progress = no_progress) -> tuple[Motion, list[float]]:
+    """(the motion, its stage seconds): the first double grasp, best first, whose whole motion is valid."""
+    if p.planner not in PLANNERS:
+        raise ValueError(f"motion.planner must be one of {', '.join(PLANNERS)}, got '{p.planner}'")
+    robot = scene.robot
+    cm = build_collision_model(robot, scene.environment)
+    transit = transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding)
+    contact = contact_profile(p)
+    graph = MotionGraph(roadmap)
+    tried: list[str] = []
+    pieces: list[Piece] | None = None
+    planner = None
+    count = min(len(dg), p.max_double_grasps)
+    for k in range(count):
+        progress(k / max(count, 1), f"double grasp {k + 1} of {count}")
+        planner = PhasePlanner(scene, cm, graph, transit, contact, p, rng, baseline=p.planner == "rrt")
+        try:
+            pieces = planner.plan(dg.q_grasp[k], dg.q_exch[k], dg.q_place[k], hand_grasp(pick, int(dg.pick_rank[k])),
+                                  hand_grasp(place, int(dg.place_rank[k])))
+        except PieceFailed as exc:
+            tried.append(str(exc))
+            continue
+        tried.append("")
+        break
+    resolution = {"transit": transit.describe(), "contact": contact.describe(),
+                  "bound": "largest displacement of any robot or carried-object point, relative to what it may hit, between two checks"}
+    if pieces is None:
+        failure = f"no valid motion for any of the {count} double grasps tried: " + "; ".join(
+            f"{i + 1}: {why}" for i, why in enumerate(tried)) if count else "no double grasp to move with"
+        return _empty(p, robot, tried, resolution, failure), []
+    motion = _sampled(scene, pieces, p, tried, resolution, planner)
+    seconds = [x for s in planner.stats for x in (s.seconds_planning, s.seconds_validating, s.seconds_shortcut, s.seconds_contact)]
+    progress(1.0, f"{motion.duration:.1f} s of motion with double grasp {len(tried)}")
+    return motion, seconds
+
+
+def _empty(p: MotionParams, robot, tried: list, resolution: dict, failure: str) -> Motion:
+    nq = robot.nq
+    return Motion(p.planner, -1, tried, [], list(robot.spec.arm_names), resolution, [], failure, np.zeros(0), np.zeros((0, nq)),
+                  np.zeros(0, np.int8), np.zeros((0, 4, 4)), np.zeros(0, np.int8), np.zeros((0, 2, 3)), np.zeros(5, np.int64))
+
+
+def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, resolution: dict, planner: PhasePlanner) -> Motion:
+    """Time every piece, sample it, and pose the object and wrists at every sample."""
+    robot = scene.robot
+    arms = list(robot.spec.arm_names)
+    vmax = np.minimum(np.asarray(robot.model.velocityLimit, float), p.max_velocity)
+    amax = np.full(robot.nq, p.max_acceleration)
+    dt = 1.0 / p.rate
+    qs, phase, holder, poses, ends = [scene.q_initial[None]], [0], [-1], [scene.object_initial[None]], []
+    data = robot.model.createData()
+    palms = {a: robot.frame_id(robot.palm_frame(a)) for a in arms}
+    mounts = [robot.frame_id(robot.spec.arm(a).hand.mount_frame) for a in arms]
+    wrists = []
+    for piece in pieces:
+        _, q = sample_polyline(piece.path, vmax, amax, dt)
+        s = piece.situation
+        for qi in q:
+            pin.framesForwardKinematics(robot.model, data, qi)
+            palm = data.oMf[palms[s.holder]].homogeneous if s.holder else None
+            poses.append(s.object_pose(palm)[None])
+            wrists.append([data.oMf[m].translation.copy() for m in mounts])
+        qs.append(q)
+        phase += [piece.phase] * len(q)
+        holder += [arms.index(s.holder) if s.holder else -1] * len(q)
+        ends.append(sum(len(x) for x in qs) - 1)
+    pin.framesForwardKinematics(robot.model, data, scene.q_initial)
+    wrists.insert(0, [data.oMf[m].translation.copy() for m in mounts])
+    q = np.concatenate(qs)
+    phase_arr = np.array(phase, np.int8)
+    key = [0] + [ends[i] for i, pc in enumerate(pieces) if (pc.phase, pc.part) in ((0, "closing"), (1, "closing"), (2, "set-down"))][:3]
+    key.append(len(q) - 1)
+    t = np.arange(len(q)) * dt
+    table = []
+    for i, st in enumerate(planner.stats):
+        sel = np.flatnonzero(phase_arr == i)
+        seg = q[sel[0] - 1 if sel[0] else 0: sel[-1] + 1] if len(sel) else q[:0]
+        table.append({"phase": PHASES[i], "nodes_planning": st.nodes_planning, "nodes_validating": st.nodes_validating,
+                      "edges_invalidated": st.edges_invalidated, "rrt_calls": st.rrt_calls, "searches": st.searches,
+                      "path_length": round(float(np.linalg.norm(np.diff(seg, axis=0), axis=1).sum()), 4),
+                      "duration": round(float(len(sel) * dt), 4)})
+    stages = []
+    for row in table:
+        stages += [{"stage": f"{row['phase']}: transit planning", "count": row["nodes_planning"], "note": f"{row['searches']} searches"},
+                   {"stage": f"{row['phase']}: transit validation", "count": row["nodes_validating"],
+                    "note": f"{row['edges_invalidated']} edges invalidated, {row['rrt_calls']} RRT calls"},
+                   {"stage": f"{row['phase']}: shortcutting", "count": 0, "note": ""},
+                   {"stage": f"{row['phase']}: approach, fingers, lift", "count": 0,
+                    "note": f"path {row['path_length']:.2f} rad, {row['duration']:.2f} s"}]
+    return Motion(p.planner, len(tried) - 1, tried, table, arms, resolution, stages, "", t, q, phase_arr, np.concatenate(poses),
+                  np.array(holder, np.int8), np.array(wrists), np.array(key, np.int64))
+
+
+def run(ctx: StepContext) -> Motion:
+    i = ctx.inputs
+    motion, seconds = plan_motion(ctx.scene, i["pick_grasps"], i["place_grasps"], i["double_grasps"], i["roadmap"], ctx.params,
+                                  ctx.rng, ctx.progress)
+    ctx.timings.extend(seconds)
+    return motion
+
+
+NAME = "motion"
+STEP = Step(NAME, "the whole task's motion: Grasp, Carry, Place, Rest on the Super Graph (V-B)",
+            ("pick_grasps", "place_grasps", "double_grasps", "roadmap"), MotionParams, Motion, run)

@@ -1,0 +1,100 @@
+"""State and motion validity (OMPL's StateValidityChecker and MotionValidator) for one situation of the object.
+
+One way to ask "is this configuration / this straight motion valid here": a `Validity` checks a
+named pair subset of a situation's collision model (see situation.py) with the local planner's
+displacement bound (roadmap/local_planner.py), so a valid motion keeps every checked pair at least
+its clearance apart along the whole continuous segment. Two profiles state the paddings:
+`transit` keeps the offline roadmap's clearances (so roadmap edges and new edges guarantee the same), and
+`contact` is tighter, for the short motions that end touching the object (approach, closing,
+opening, retreat, lift, set-down).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from ..collision import CollisionModel
+from ..roadmap.local_planner import SegmentChecker
+
+
+class StateValidity(Protocol):
+    def state_valid(self, q: np.ndarray) -> bool: ...
+
+
+class MotionValidity(StateValidity, Protocol):
+    checks: int
+
+    def motion_valid(self, qa: np.ndarray, qb: np.ndarray, ends: bool = True) -> bool: ...
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Paddings (checked as colliding closer than) and the clearances every motion keeps, in metres."""
+
+    name: str
+    env_padding: float
+    env_clearance: float
+    self_padding: float
+    self_clearance: float
+    object_padding: float  # robot–object pairs
+    object_clearance: float
+
+    def describe(self) -> dict:
+        """The paddings and clearances, and the largest relative displacement between two checks of each kind of pair."""
+        return {**{k: v for k, v in dataclasses.asdict(self).items() if k != "name"},
+                "obstacle_step_m": round(2 * (self.env_padding - self.env_clearance), 6),
+                "robot_step_m": round(2 * (self.self_padding - self.self_clearance), 6),
+                "object_step_m": round(2 * (self.object_padding - self.object_clearance), 6)}
+
+
+def transit_profile(roadmap_resolution: dict, env_padding: float, self_padding: float) -> Profile:
+    """Online transit checks keep the roadmap's clearances (read from its recorded resolution), so a path mixing
+    roadmap edges and new ones guarantees one thing; paddings closer to them check more densely but accept
+    configurations nearer the obstacles (the exchange holds the arms close to the torso). The object is padded like
+    the robot."""
+    r = roadmap_resolution
+    env_clearance, self_clearance = float(r["env_clearance_m"]), float(r["self_clearance_m"])
+    if env_padding <= env_clearance or self_padding <= self_clearance:
+        raise ValueError(f"transit paddings must exceed the roadmap's clearances ({env_clearance} m, {self_clearance} m)")
+    return Profile("transit", env_padding, env_clearance, self_padding, self_clearance, self_padding, self_clearance)
+
+
+@dataclass(frozen=True, eq=False)
+class Validity:
+    """Checks states and straight segments of one collision model over one pair subset, at the profile's resolution.
+
+    The segment checker holds scratch data: one per thread or process.
+    """
+
+    seg: SegmentChecker
+    profile: Profile
+    subset: str = "all"
+
+    def on(self, subset: str) -> "Validity":
+        """The same model and scratch data over another subset (e.g. 'changed' for roadmap edges)."""
+        return dataclasses.replace(self, subset=subset)
+
+    @property
+    def checks(self) -> int:
+        return self.seg.checks
+
+    def state_valid(self, q: np.ndarray) -> bool:
+        return self.seg.free(q, self.subset)
+
+    def motion_valid(self, qa: np.ndarray, qb: np.ndarray, ends: bool = True) -> bool:
+        """Every check of the straight segment passes (`ends=False`: both ends are known valid)."""
+        return self.seg.segment_free(qa, qb, self.subset, ends)
+
+    def path_valid(self, path: np.ndarray) -> bool:
+        """Every state and every segment of a polyline."""
+        return all(self.state_valid(q) for q in path) and all(self.motion_valid(a, b, ends=False) for a, b in zip(path[:-1], path[1:]))
+
+
+def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all") -> Validity:
+    """A validity of `cm` with the profile's paddings (the model's own are replaced)."""
+    cm = dataclasses.replace(cm, params=dataclasses.replace(cm.params, env_padding=profile.env_padding,
+                                                            self_padding=profile.self_padding, object_padding=profile.object_padding))
+    return Validity(SegmentChecker(cm, profile.env_clearance, profile.self_clearance, profile.object_clearance), profile, subset)
