@@ -7,6 +7,7 @@ from .double_grasps import DoubleGraspsLayer
 from .exchange import ExchangeLayer
 from .grasp_configs import GraspConfigsLayer
 from .grasps import PickGraspsLayer, PlaceGraspsLayer
+from .motion import MotionLayer
 from .roadmap import RoadmapLayer
 
 LAYERS: dict[str, type[StepLayer]] = {
@@ -16,4 +17,5 @@ LAYERS: dict[str, type[StepLayer]] = {
     "exchange": ExchangeLayer,
     "double_grasps": DoubleGraspsLayer,
     "roadmap": RoadmapLayer,
+    "motion": MotionLayer,
 }

@@ -1,0 +1,256 @@
+"""The `motion` step drawn (paper V-B): the whole task played back from the saved trajectory, nothing recomputed.
+
+A timeline over the trajectory's samples poses the robot and draws the object at the sample's
+`object_pose` (it moves with the holding hand); play / pause runs the timeline in a background
+thread at a chosen speed. Each wrist's route is drawn as line segments coloured by phase, and the
+GUI folder shows the current phase and Table I of the session (counts from the result, seconds
+from the step's session record).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import viser
+
+from planner.motion.result import PHASES, Motion
+from planner.session import Session
+from planner.task import Scene
+
+from ..meshes import matrix_wxyz
+from ..scene_layer import OBJECT_COLOR
+from .base import StepLayer
+from .stages import FAILURE_COLOR
+
+PHASE_COLORS = ((0, 170, 170), (220, 40, 40), (200, 50, 200), (110, 110, 110))  # Grasp, Carry, Place, Rest
+PHASE_COLOR_NAMES = ("teal", "red", "magenta", "grey")
+ROUTE_THICKNESS = 0.004  # m
+FPS = 30.0  # frames a second at most while playing (samples are skipped when the trajectory's rate or the speed is higher)
+SPEEDS = (0.1, 4.0)  # playback speed range (1 = real time)
+KEYFRAMES = ("start", "grasp", "exchange", "place", "end")  # names of `Motion.keyframes`
+STAGE_SECONDS = ("planning", "validating", "shortcutting", "contact")  # the record's 4 seconds per phase, in order
+
+
+def route_segments(result: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """Each wrist's route as ((n-1)*wrists, 2, 3) float32 segments between consecutive samples, and their colours by the
+    phase of each segment's end sample (same shape, uint8)."""
+    w = result.wrists
+    if len(w) < 2:
+        return np.zeros((0, 2, 3), np.float32), np.zeros((0, 2, 3), np.uint8)
+    points = np.stack([w[:-1], w[1:]], axis=2)  # (n-1, wrists, 2 ends, 3)
+    colors = np.asarray(PHASE_COLORS, np.uint8)[result.phase[1:].astype(int)]  # (n-1, 3)
+    colors = np.broadcast_to(colors[:, None, None, :], points.shape)
+    return points.reshape(-1, 2, 3).astype(np.float32), np.ascontiguousarray(colors.reshape(-1, 2, 3))
+
+
+def table_one(result: Motion, seconds: list[float] | None) -> str:
+    """Table I of the session as markdown: per phase, nodes added planning / validating, the seconds of planning,
+    validating, shortcutting and contact motions (from the session record; '–' when absent), edges invalidated,
+    RRT calls, path length and duration."""
+    head = ("| phase | nodes plan. | nodes valid. | s plan. | s valid. | s shortcut | s contact | edges inval. | RRT calls "
+            "| length (rad) | duration (s) |\n|---|" + "---:|" * 10)
+    rows = []
+    for k, p in enumerate(result.phases):
+        secs = seconds[4 * k: 4 * k + 4] if seconds and len(seconds) >= 4 * k + 4 else None
+        cells = [f"{s:.3f}" for s in secs] if secs else ["–"] * 4
+        rows.append(f"| {p['phase']} | {p['nodes_planning']} | {p['nodes_validating']} | " + " | ".join(cells)
+                    + f" | {p['edges_invalidated']} | {p['rrt_calls']} | {p['path_length']:.2f} | {p['duration']:.2f} |")
+    return "\n".join([head, *rows])
+
+
+class MotionLayer(StepLayer):
+    """The trajectory on a timeline: the robot posed and the object drawn at the current sample; play / pause, speed,
+    jumps to the keyframes, each wrist's route coloured by phase and Table I."""
+
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+        super().__init__(server, scene, root, workbench, session)
+        self.result: Motion | None = None
+        self.index = 0  # the sample shown
+        self.playing = False
+        self.job: threading.Thread | None = None
+        self.object: viser.FrameHandle | None = None
+        self.timeline: viser.GuiSliderHandle | None = None
+        self.speed: viser.GuiSliderHandle | None = None
+        self.play_button: viser.GuiButtonHandle | None = None
+        self.jump: viser.GuiButtonGroupHandle | None = None
+        self.now: viser.GuiMarkdownHandle | None = None
+        self._generation = 0  # bumped to stop a running playback
+        self._frame_lock = threading.Lock()  # a playback frame and pause / removal never interleave
+
+    # -- drawing ---------------------------------------------------------------------------------
+
+    def update(self, result: Motion) -> None:
+        self.stop()
+        self.remove_folder()
+        self.result, self.index, self.poses = result, 0, {}
+        self.timeline = self.speed = self.play_button = self.jump = self.now = None
+        if len(result.t):
+            self._draw_routes(result)
+            node = f"{self.name}/object"
+            self.object = self.server.scene.add_frame(node, show_axes=False)
+            mesh = self.scene.object_mesh
+            self.server.scene.add_mesh_simple(f"{node}/mesh", mesh.vertices, mesh.faces, color=OBJECT_COLOR,
+                                              cast_shadow=False, receive_shadow=False)
+            self._static_object(False)  # the layer's object replaces the scene's one at the initial placement
+        self._build_gui(result)
+        if len(result.t):
+            self.show(0)
+
+    def _draw_routes(self, result: Motion) -> None:
+        points, colors = route_segments(result)
+        if len(points):
+            self.server.scene.add_line_segments(f"{self.name}/routes", points, colors, thickness=ROUTE_THICKNESS)
+
+    def _static_object(self, visible: bool) -> None:
+        """Show or hide the workbench's object at the initial placement (the scene layer's), if there is a workbench."""
+        layer = getattr(self.workbench, "scene_layer", None)
+        if layer is None:
+            return
+        try:
+            layer.object.visible = visible
+        except RuntimeError:  # that scene was replaced (its object removed): nothing to restore
+            pass
+
+    def _seconds(self) -> list[float] | None:
+        """The step's stage seconds from the session record (4 per phase), if the session is known."""
+        if self.session is None or "motion" not in self.session.finished():
+            return None
+        return self.session.record_of("motion").get("stage_seconds")
+
+    def summary(self, result: Motion) -> str:
+        """Which double grasp moved, the routes' colours, Table I and the failure (red)."""
+        used = (f"Double grasp **{result.double_grasp + 1}** of {len(result.tried)} tried" if result.double_grasp >= 0
+                else f"No double grasp worked ({len(result.tried)} tried)")
+        failed = [f"{k + 1}: {why}" for k, why in enumerate(result.tried) if why]
+        text = (f"{used}; planner `{result.planner}`, {len(result.t)} samples, {result.duration:.2f} s.\n\n"
+                f"Wrist routes: " + ", ".join(f"{p} {c}" for p, c in zip(PHASES, PHASE_COLOR_NAMES)) + ".\n\n")
+        if result.phases:
+            text += table_one(result, self._seconds())
+        if failed and not result.failure:
+            text += "\n\nFailed before: " + "; ".join(failed)
+        if result.failure:
+            text += f"\n\n<span style='color:{FAILURE_COLOR}'>**Failed:** {result.failure}</span>"
+        return text
+
+    def _build_gui(self, result: Motion) -> None:
+        gui = self.server.gui
+        n = len(result.t)
+        with gui.add_folder("Motion") as self.folder:
+            if n:
+                self.now = gui.add_markdown("")
+                self.timeline = gui.add_slider("Sample", min=0, max=max(n - 1, 1), step=1, initial_value=0,
+                                               hint="The trajectory's sample shown (robot and object)")
+                self.play_button = gui.add_button("Play", hint="Play / pause the motion from the current sample")
+                self.speed = gui.add_slider("Speed", min=SPEEDS[0], max=SPEEDS[1], step=0.1, initial_value=1.0,
+                                            hint="Playback speed (1 = real time)")
+                self.jump = gui.add_button_group("Jump to", KEYFRAMES)
+            gui.add_markdown(self.summary(result))
+        if self.timeline is not None and self.play_button is not None and self.jump is not None:
+            self.timeline.on_update(lambda e: self.show(int(e.target.value)))
+            self.play_button.on_click(lambda _: self.pause() if self.playing else self.play())
+            self.jump.on_click(lambda e: self.seek(int(self.result.keyframes[KEYFRAMES.index(e.target.value)])))
+
+    # -- the current sample ----------------------------------------------------------------------
+
+    def seek(self, i: int) -> None:
+        """Move the timeline to sample i (it draws the sample)."""
+        if self.timeline is not None:
+            self.timeline.value = i
+
+    def show(self, i: int) -> None:
+        """Draw sample i: the object at its pose, the phase, and the workbench's robot (only its meshes while playing, so
+        its joint sliders stay; fully, with sliders and collisions, otherwise)."""
+        r = self.result
+        if r is None or not len(r.t):
+            return
+        i = int(np.clip(i, 0, len(r.t) - 1))
+        self.index = i
+        with self.server.atomic():
+            if self.object is not None:
+                self.object.wxyz, self.object.position = matrix_wxyz(r.object_pose[i])
+            if self.now is not None:
+                self.now.content = self.caption(i)
+        wb = self.workbench
+        if wb is None:
+            return
+        if self.playing:
+            wb.robot_layer.update(r.q[i])
+        else:
+            wb.pose_robot(r.q[i])
+
+    def caption(self, i: int) -> str:
+        """The phase and time of sample i, and who holds the object."""
+        r = self.result
+        assert r is not None
+        holder = int(r.holder[i])
+        held = f"held by the {r.arms[holder]} hand" if holder >= 0 else "object static"
+        return f"**{PHASES[int(r.phase[i])]}** — t = {r.t[i]:.2f} s of {r.duration:.2f} s, sample {i}; {held}"
+
+    # -- playback --------------------------------------------------------------------------------
+
+    def play(self) -> threading.Thread | None:
+        """Play from the current sample (from the start when at the end) in a background thread."""
+        r = self.result
+        if r is None or len(r.t) < 2 or self.playing:
+            return None
+        if self.index >= len(r.t) - 1:
+            self.seek(0)
+        with self._frame_lock:
+            self._generation += 1
+            self.playing = True
+        if self.play_button is not None:
+            self.play_button.label = "Pause"
+        self.job = threading.Thread(target=self._run, args=(self._generation,), daemon=True)
+        self.job.start()
+        return self.job
+
+    def pause(self) -> None:
+        """Stop playing; the robot is then posed fully at the shown sample (sliders and collisions follow)."""
+        if not self.playing:
+            return
+        self.stop()
+        if self.play_button is not None:
+            self.play_button.label = "Play"
+        self.show(self.index)
+
+    def stop(self) -> None:
+        """End a running playback at its next frame (nothing is redrawn)."""
+        with self._frame_lock:
+            self._generation += 1
+            self.playing = False
+
+    def _run(self, generation: int) -> None:
+        """Advance the timeline by the elapsed time times the speed, at most FPS frames a second, until the end or a stop."""
+        r = self.result
+        assert r is not None and self.timeline is not None and self.speed is not None
+        rate = (len(r.t) - 1) / max(r.duration, 1e-9)  # samples a second
+        pos, shown, last = float(self.index), self.index, time.monotonic()
+        try:
+            while True:
+                time.sleep(1.0 / FPS)
+                with self._frame_lock:
+                    if generation != self._generation:
+                        return
+                    if self.index != shown:  # the user moved the timeline meanwhile: go on from there
+                        pos = float(self.index)
+                    now = time.monotonic()
+                    pos = min(pos + (now - last) * float(self.speed.value) * rate, len(r.t) - 1)
+                    last, shown = now, int(pos)
+                    self.timeline.value = shown  # draws the sample (see show)
+                    if shown < len(r.t) - 1:
+                        continue
+                    self.playing = False
+                break
+            self.play_button.label = "Play"
+            self.show(self.index)  # at the end: the robot fully posed
+        except RuntimeError:  # a handle was removed under us (the layer or the robot was replaced): nothing left to draw
+            return
+
+    # -- removal ---------------------------------------------------------------------------------
+
+    def remove(self) -> None:
+        self.stop()
+        self._static_object(True)
+        super().remove()
