@@ -1,0 +1,214 @@
+"""The motion layer and the motion's HTML export in a real browser: the example's motion is played back from the saved
+trajectory; the object's pixels follow the holding hand from a Carry sample to a Place sample; Play advances the timeline
+(the joint sliders stay); the exported HTML page animates offline."""
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from playwright.sync_api import Browser, Page
+from scipy.spatial.transform import Rotation
+from test_workbench_browser import (CHANGED, EXAMPLE, VIEWPORT, _changed, _free_port, _open, _settled, _until_changed, _view,
+                                    _wait_for)
+
+from planner.motion.result import PHASES, Motion
+from planner.session import Session
+from workbench.app import Workbench
+from workbench.export import EXPORT_FPS, MAX_FRAMES, export_html, frame_samples
+from workbench.layers import LAYERS
+from workbench.layers.motion import PHASE_COLORS, MotionLayer, route_segments, table_one
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+CARRY, PLACE = PHASES.index("Carry"), PHASES.index("Place")
+OBJECT_PIXELS = 40  # fewest pixels of the object on screen for its position to be measured
+NEAR = 30.0  # px: the object's pixels must be centred this close to where its saved pose projects
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    """A copy of the example session with its motion step (run here, resuming the copy, when the example has none)."""
+    folder = tmp_path_factory.mktemp("sessions") / "example"
+    shutil.copytree(EXAMPLE, folder)
+    if "motion" not in Session.open(folder).finished():
+        run = subprocess.run([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(folder), "--resume"],
+                             check=False, capture_output=True, text=True, timeout=600)
+        assert run.returncode == 0, run.stderr[-2000:]
+    return folder
+
+
+@pytest.fixture(scope="module")
+def workbench(folder: Path) -> Iterator[Workbench]:
+    wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=folder.parent)
+    for name, layer in wb.session_layers.layers.items():
+        layer.visible = name == "motion"  # the roadmap's thousands of edges take software WebGL seconds a frame
+    yield wb
+    wb.close()
+
+
+@pytest.fixture(scope="module")
+def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
+    page = _open(workbench, browser)
+    yield page
+    page.close()
+
+
+@pytest.fixture(scope="module")
+def layer(workbench: Workbench) -> MotionLayer:
+    assert workbench.session_layers is not None and not workbench.session_layers.errors, workbench.session_layers.errors
+    layer = workbench.session_layers.layers["motion"]
+    assert isinstance(layer, MotionLayer) and layer.result is not None
+    assert not layer.result.failure and len(layer.result.t) > 2, layer.result.failure
+    return layer
+
+
+def _middle_held(result: Motion, phase: int) -> int:
+    """The middle sample of `phase` among those where a hand holds the object."""
+    samples = np.flatnonzero((result.phase == phase) & (result.holder >= 0))
+    assert len(samples), f"no sample of {PHASES[phase]} has the object held"
+    return int(samples[len(samples) // 2])
+
+
+def _project(workbench: Workbench, point: np.ndarray) -> np.ndarray:
+    """Where a world point appears in a screenshot (x, y px), through the browser's camera (OpenCV convention)."""
+    camera = next(iter(workbench.server.get_clients().values())).camera
+    R = Rotation.from_quat(np.roll(camera.wxyz, -1)).as_matrix()  # camera to world
+    x, y, z = R.T @ (point - camera.position)
+    assert z > 0, "the point is behind the camera"
+    f = camera.image_height / 2 / np.tan(camera.fov / 2)
+    u, v = camera.image_width / 2 + f * x / z, camera.image_height / 2 + f * y / z
+    return np.array([u * VIEWPORT["width"] / camera.image_width, v * VIEWPORT["height"] / camera.image_height])
+
+
+def _object_on_screen(workbench: Workbench, page: Page, layer: MotionLayer) -> np.ndarray:
+    """The centre (x, y px) of the pixels the layer's object covers: the view with it shown, against the view without
+    (taken again until the view with it is the same before and after, so nothing else changed meanwhile)."""
+    assert layer.object is not None
+    for _ in range(3):
+        shown = _settled(page)
+        layer.object.visible = False
+        try:
+            hidden = _settled(page)
+        finally:
+            layer.object.visible = True
+        if _changed(_settled(page), shown) < 1e-4:
+            break
+    else:
+        raise AssertionError("the view kept changing while the object was hidden and shown again")
+    mask = np.abs(shown - hidden).max(axis=2) > 24
+    assert mask.sum() >= OBJECT_PIXELS, f"the object covers {mask.sum()} pixels: not on screen"
+    rows, cols = np.nonzero(mask)
+    return np.array([cols.mean(), rows.mean()])
+
+
+def _object_centre(layer: MotionLayer, i: int) -> np.ndarray:
+    """The object's centre of mass at sample i, in the world, as the result saved it."""
+    assert layer.result is not None
+    T = layer.result.object_pose[i]
+    return T[:3, :3] @ np.asarray(layer.scene.object_mesh.center_mass) + T[:3, 3]
+
+
+def test_layer_helpers(layer: MotionLayer) -> None:
+    """Route segments join consecutive wrist positions, coloured by phase; the export's frames stay within the rate and
+    count limits and keep both ends; Table I carries the record's seconds."""
+    r = layer.result
+    points, colors = route_segments(r)
+    n, wrists = len(r.t), r.wrists.shape[1]
+    assert points.shape == colors.shape == ((n - 1) * wrists, 2, 3)
+    assert np.allclose(points[0], r.wrists[:2, 0], atol=1e-6) and np.allclose(points[1], r.wrists[:2, 1], atol=1e-6)
+    k = _middle_held(r, CARRY)
+    assert tuple(colors[(k - 1) * wrists][0]) == PHASE_COLORS[CARRY]
+    for t in (r.t, np.arange(5000) / 30.0, np.arange(3) / 30.0):
+        s = frame_samples(t)
+        assert s[0] == 0 and s[-1] == len(t) - 1 and len(s) <= MAX_FRAMES and np.all(np.diff(s) > 0)
+        assert len(s) - 1 <= (t[-1] - t[0]) * EXPORT_FPS + 1
+    seconds = layer.session.record_of("motion")["stage_seconds"]
+    table = table_one(r, seconds)
+    assert len(seconds) == 4 * len(PHASES) and all(p in table for p in PHASES) and f"{seconds[5]:.3f}" in table
+
+
+def test_motion_layer_is_drawn(workbench: Workbench, page: Page, layer: MotionLayer) -> None:
+    """The layer is registered and drawn: its folder with the timeline, Table I and the current phase."""
+    assert LAYERS["motion"] is MotionLayer
+    page.get_by_text("nodes plan.").first.wait_for(timeout=10_000)
+    page.get_by_text("Grasp —").first.wait_for(timeout=10_000)
+    shown = _settled(page)
+    layer.visible = False
+    try:
+        assert _until_changed(page, shown) > CHANGED, "hiding the motion layer (routes, object) changed nothing on screen"
+    finally:
+        layer.visible = True
+    _settled(page)
+
+
+def test_object_moves_with_the_hand(workbench: Workbench, page: Page, layer: MotionLayer) -> None:
+    """At a Carry sample, then a Place sample, the robot is at the sample's configuration and the object's pixels sit where
+    the saved object pose projects: they moved on screen with the holding hand."""
+    r = layer.result
+    centres = []
+    try:
+        for phase in (CARRY, PLACE):
+            i = _middle_held(r, phase)
+            layer.timeline.value = i
+            assert _wait_for(lambda i=i: np.allclose(workbench.q, r.q[i])), "the timeline did not pose the robot"
+            assert PHASES[phase] in layer.now.content
+            seen, expected = _object_on_screen(workbench, page, layer), _project(workbench, _object_centre(layer, i))
+            assert np.linalg.norm(seen - expected) < NEAR, f"{PHASES[phase]}: object seen at {seen}, its pose projects to {expected}"
+            centres.append(seen)
+        moved = np.linalg.norm(centres[1] - centres[0])
+        expected = np.linalg.norm(_project(workbench, _object_centre(layer, _middle_held(r, PLACE)))
+                                  - _project(workbench, _object_centre(layer, _middle_held(r, CARRY))))
+        assert moved > 2 * NEAR and abs(moved - expected) < NEAR, f"the object moved {moved:.0f} px on screen, its poses {expected:.0f} px"
+    finally:
+        layer.seek(0)
+
+
+def test_play_advances_the_timeline(workbench: Workbench, page: Page, layer: MotionLayer) -> None:
+    """Play moves the timeline on (robot meshes only: the joint sliders are not rebuilt); Pause stops it with the robot
+    fully posed at the shown sample."""
+    layer.seek(0)
+    before = _settled(page)
+    sliders = dict(workbench._slider_of)
+    page.get_by_role("button", name="Play", exact=True).click()
+    try:
+        assert _wait_for(lambda: layer.playing and layer.index > len(layer.result.t) // 4, 60), f"stuck at sample {layer.index}"
+        assert layer.timeline.value == layer.index and layer.play_button.label == "Pause"
+        assert workbench._slider_of == sliders, "the joint sliders were rebuilt while playing"
+        page.get_by_role("button", name="Pause", exact=True).click()
+        assert _wait_for(lambda: not layer.playing, 10), "Pause did not stop the playback"
+        shown = layer.index
+        time.sleep(0.5)
+        assert layer.index == shown, "the timeline moved after Pause"
+        assert _wait_for(lambda: np.allclose(workbench.q, layer.result.q[shown])), "the robot is not at the shown sample"
+        assert _changed(_settled(page), before) > CHANGED, "playing changed nothing on screen"
+    finally:
+        layer.pause()
+        layer.seek(0)
+
+
+def _scene(page: Page) -> np.ndarray:
+    """The exported page's 3-D view without the notification at the top and the player bar at the bottom (its clock moves)."""
+    return _view(page)[160:-60]
+
+
+def test_exported_html_animates(folder: Path, tmp_path: Path, browser: Browser) -> None:
+    """The exported page plays the motion offline: once drawn, its 3-D view keeps changing."""
+    out = tmp_path / "motion.html"
+    export_html(folder, out)
+    html = out.read_text()
+    assert "__VISER_EMBED_DATA__" in html and len(html) < 30_000_000
+    page = browser.new_page(viewport=VIEWPORT)
+    try:
+        page.goto(out.as_uri())
+        assert _wait_for(lambda: len(np.unique(_scene(page).reshape(-1, 3), axis=0)) > 100, 60), "the exported page draws nothing"
+        for _ in range(2):
+            shot = _scene(page)
+            time.sleep(1.5)
+            assert _wait_for(lambda shot=shot: _changed(_scene(page), shot) > CHANGED, 20), "the exported page does not animate"
+    finally:
+        page.close()
