@@ -20,7 +20,7 @@ from test_workbench_browser import (CHANGED, EXAMPLE, VIEWPORT, _changed, _free_
 from planner.motion.result import PHASES, Motion
 from planner.session import Session
 from workbench.app import Workbench
-from workbench.export import EXPORT_FPS, MAX_FRAMES, export_html, frame_samples
+from workbench.export import EXPORT_FPS, MAX_FRAMES, frame_samples
 from workbench.layers import LAYERS
 from workbench.layers.motion import PHASE_COLORS, MotionLayer, route_segments, table_one
 
@@ -196,19 +196,21 @@ def _scene(page: Page) -> np.ndarray:
     return _view(page)[160:-60]
 
 
-def test_exported_html_animates(folder: Path, tmp_path: Path, browser: Browser) -> None:
-    """The exported page plays the motion offline: once drawn, its 3-D view keeps changing."""
+def test_exported_html_animates(page: Page, layer: MotionLayer, browser: Browser, tmp_path: Path) -> None:
+    """"Export animation" downloads one HTML page that plays the motion offline: once drawn, its 3-D view keeps changing."""
+    with page.expect_download(timeout=180_000) as download:
+        page.get_by_role("button", name="Export animation").click()
     out = tmp_path / "motion.html"
-    export_html(folder, out)
+    download.value.save_as(out)
     html = out.read_text()
     assert "__VISER_EMBED_DATA__" in html and len(html) < 30_000_000
-    page = browser.new_page(viewport=VIEWPORT)
+    exported = browser.new_page(viewport=VIEWPORT)
     try:
-        page.goto(out.as_uri())
-        assert _wait_for(lambda: len(np.unique(_scene(page).reshape(-1, 3), axis=0)) > 100, 60), "the exported page draws nothing"
+        exported.goto(out.as_uri())
+        assert _wait_for(lambda: len(np.unique(_scene(exported).reshape(-1, 3), axis=0)) > 100, 60), "the exported page draws nothing"
         for _ in range(2):
-            shot = _scene(page)
+            shot = _scene(exported)
             time.sleep(1.5)
-            assert _wait_for(lambda shot=shot: _changed(_scene(page), shot) > CHANGED, 20), "the exported page does not animate"
+            assert _wait_for(lambda shot=shot: _changed(_scene(exported), shot) > CHANGED, 20), "the exported page does not animate"
     finally:
-        page.close()
+        exported.close()

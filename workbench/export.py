@@ -56,8 +56,8 @@ def motion_html(server: viser.ViserServer, robot: RobotLayer, motion: MotionLaye
     return serializer.as_html()
 
 
-def export_html(session_dir: Path, out: Path) -> None:
-    """Draw a saved session (scene, robot at its initial configuration, every step layer) and write it as HTML; with a
+def session_html(session_dir: Path) -> str:
+    """A saved session drawn (scene, robot at its initial configuration, every step layer) as one HTML page; with a
     motion, the page plays it (the other step layers hidden, the scene's object replaced by the moving one)."""
     session = Session.open(session_dir)
     with contextlib.redirect_stdout(io.StringIO()):  # viser prints its URL banner: nobody will connect to this server
@@ -72,9 +72,12 @@ def export_html(session_dir: Path, out: Path) -> None:
                 scene.object.visible = False
                 for name, layer in layers.layers.items():
                     layer.visible = name == "motion"
-                html = motion_html(server, robot, motion)
-            else:
-                html = scene_html(server)
+                return motion_html(server, robot, motion)
+            return scene_html(server)
         finally:
             server.stop()
-    atomic_write_text(Path(out), html)
+
+
+def export_html(session_dir: Path, out: Path) -> None:
+    """Write `session_html` of a saved session to `out`."""
+    atomic_write_text(Path(out), session_html(session_dir))

@@ -8,6 +8,7 @@ from the step's session record).
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from typing import Any
@@ -20,6 +21,7 @@ from planner.session import Session
 from planner.task import Scene
 
 from ..meshes import matrix_wxyz
+from ..notify import error_text
 from ..scene_layer import OBJECT_COLOR
 from .base import StepLayer
 from .stages import FAILURE_COLOR
@@ -76,6 +78,8 @@ class MotionLayer(StepLayer):
         self.play_button: viser.GuiButtonHandle | None = None
         self.jump: viser.GuiButtonGroupHandle | None = None
         self.now: viser.GuiMarkdownHandle | None = None
+        self.export_button: viser.GuiButtonHandle | None = None
+        self.exporting: threading.Thread | None = None
         self._generation = 0  # bumped to stop a running playback
         self._frame_lock = threading.Lock()  # a playback frame and pause / removal never interleave
 
@@ -146,11 +150,16 @@ class MotionLayer(StepLayer):
                 self.speed = gui.add_slider("Speed", min=SPEEDS[0], max=SPEEDS[1], step=0.1, initial_value=1.0,
                                             hint="Playback speed (1 = real time)")
                 self.jump = gui.add_button_group("Jump to", KEYFRAMES)
+                if self.session is not None:
+                    self.export_button = gui.add_button("Export animation", hint="Download the whole motion as one HTML "
+                                                        "file that plays offline (10 frames a second at most)")
             gui.add_markdown(self.summary(result))
         if self.timeline is not None and self.play_button is not None and self.jump is not None:
             self.timeline.on_update(lambda e: self.show(int(e.target.value)))
             self.play_button.on_click(lambda _: self.pause() if self.playing else self.play())
             self.jump.on_click(lambda e: self.seek(int(self.result.keyframes[KEYFRAMES.index(e.target.value)])))
+        if self.export_button is not None:
+            self.export_button.on_click(lambda e: self.export(e.client))
 
     # -- the current sample ----------------------------------------------------------------------
 
@@ -247,6 +256,32 @@ class MotionLayer(StepLayer):
             self.show(self.index)  # at the end: the robot fully posed
         except RuntimeError:  # a handle was removed under us (the layer or the robot was replaced): nothing left to draw
             return
+
+    # -- export ----------------------------------------------------------------------------------
+
+    def export(self, client: viser.ClientHandle | None) -> threading.Thread | None:
+        """In the background: record the drawn session's motion as one HTML page and send it to `client` to download."""
+        if self.session is None or client is None or self.export_button is None or self.export_button.disabled:
+            return None
+        self.export_button.disabled = True
+        self.exporting = threading.Thread(target=self._export, args=(client, self.session, self.export_button), daemon=True)
+        self.exporting.start()
+        return self.exporting
+
+    @staticmethod
+    def _export(client: viser.ClientHandle, session: Session, button: viser.GuiButtonHandle) -> None:
+        # imported here: the export draws a session through these layers (a cycle at import time)
+        from ..export import session_html
+
+        try:
+            html = session_html(session.folder)
+        except Exception as exc:  # shown, never raised into a thread nobody watches
+            client.add_notification("Export failed", error_text(exc), color="red", auto_close_seconds=10.0)
+            return
+        finally:
+            with contextlib.suppress(RuntimeError):  # the layer may have been removed meanwhile
+                button.disabled = False
+        client.send_file_download(f"{session.folder.name}-motion.html", html.encode(), save_immediately=True)
 
     # -- removal ---------------------------------------------------------------------------------
 
