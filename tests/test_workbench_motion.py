@@ -3,6 +3,7 @@ trajectory; the object's pixels follow the holding hand from a Carry sample to a
 (the joint sliders stay); the exported HTML page animates offline."""
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import subprocess
 import sys
@@ -23,6 +24,7 @@ from workbench.app import Workbench
 from workbench.export import EXPORT_FPS, MAX_FRAMES, frame_samples
 from workbench.layers import LAYERS
 from workbench.layers.motion import PHASE_COLORS, MotionLayer, route_segments, table_one
+from workbench.layers.stages import FAILURE_COLOR
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 CARRY, PLACE = PHASES.index("Carry"), PHASES.index("Place")
@@ -130,6 +132,9 @@ def test_layer_helpers(layer: MotionLayer) -> None:
     seconds = layer.session.record_of("motion")["stage_seconds"]
     table = table_one(r, seconds)
     assert len(seconds) == 4 * len(PHASES) and all(p in table for p in PHASES) and f"{seconds[5]:.3f}" in table
+    assert FAILURE_COLOR not in layer.summary(r)
+    failed = layer.summary(dataclasses.replace(r, failure="Carry phase, transit: no path"))
+    assert FAILURE_COLOR in failed and "Carry phase, transit: no path" in failed
 
 
 def test_motion_layer_is_drawn(workbench: Workbench, page: Page, layer: MotionLayer) -> None:

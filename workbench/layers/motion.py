@@ -73,6 +73,7 @@ class MotionLayer(StepLayer):
         self.playing = False
         self.job: threading.Thread | None = None
         self.object: viser.FrameHandle | None = None
+        self.routes: viser.LineSegmentsHandle | None = None
         self.timeline: viser.GuiSliderHandle | None = None
         self.speed: viser.GuiSliderHandle | None = None
         self.play_button: viser.GuiButtonHandle | None = None
@@ -88,6 +89,10 @@ class MotionLayer(StepLayer):
     def update(self, result: Motion) -> None:
         self.stop()
         self.remove_folder()
+        for handle in (self.object, self.routes):
+            if handle is not None:
+                handle.remove()
+        self.object = self.routes = None
         self.result, self.index, self.poses = result, 0, {}
         self.timeline = self.speed = self.play_button = self.jump = self.now = None
         if len(result.t):
@@ -105,7 +110,7 @@ class MotionLayer(StepLayer):
     def _draw_routes(self, result: Motion) -> None:
         points, colors = route_segments(result)
         if len(points):
-            self.server.scene.add_line_segments(f"{self.name}/routes", points, colors, thickness=ROUTE_THICKNESS)
+            self.routes = self.server.scene.add_line_segments(f"{self.name}/routes", points, colors, thickness=ROUTE_THICKNESS)
 
     def _static_object(self, visible: bool) -> None:
         """Show or hide the workbench's object at the initial placement (the scene layer's), if there is a workbench."""
