@@ -105,7 +105,7 @@ class MotionLayer(StepLayer):
             self._static_object(False)  # the layer's object replaces the scene's one at the initial placement
         self._build_gui(result)
         if len(result.t):
-            self.show(0)
+            self._draw_sample(0)  # the robot stays where it is until the timeline moves
 
     def _draw_routes(self, result: Motion) -> None:
         points, colors = route_segments(result)
@@ -174,18 +174,12 @@ class MotionLayer(StepLayer):
             self.timeline.value = i
 
     def show(self, i: int) -> None:
-        """Draw sample i: the object at its pose, the phase, and the workbench's robot (only its meshes while playing, so
-        its joint sliders stay; fully, with sliders and collisions, otherwise)."""
+        """Draw sample i and put the workbench's robot there (only its meshes while playing, so its joint sliders stay;
+        fully, with sliders and collisions, otherwise)."""
         r = self.result
         if r is None or not len(r.t):
             return
-        i = int(np.clip(i, 0, len(r.t) - 1))
-        self.index = i
-        with self.server.atomic():
-            if self.object is not None:
-                self.object.wxyz, self.object.position = matrix_wxyz(r.object_pose[i])
-            if self.now is not None:
-                self.now.content = self.caption(i)
+        i = self._draw_sample(i)
         wb = self.workbench
         if wb is None:
             return
@@ -193,6 +187,18 @@ class MotionLayer(StepLayer):
             wb.robot_layer.update(r.q[i])
         else:
             wb.pose_robot(r.q[i])
+
+    def _draw_sample(self, i: int) -> int:
+        """Make sample i (clipped to the trajectory) the shown one: the object at its pose and the caption; returns i."""
+        r = self.result
+        assert r is not None
+        self.index = i = int(np.clip(i, 0, len(r.t) - 1))
+        with self.server.atomic():
+            if self.object is not None:
+                self.object.wxyz, self.object.position = matrix_wxyz(r.object_pose[i])
+            if self.now is not None:
+                self.now.content = self.caption(i)
+        return i
 
     def caption(self, i: int) -> str:
         """The phase and time of sample i, and who holds the object."""
