@@ -140,7 +140,7 @@ def test_layer_helpers(layer: MotionLayer) -> None:
 def test_motion_layer_is_drawn(workbench: Workbench, page: Page, layer: MotionLayer) -> None:
     """The layer is registered and drawn: its folder with the timeline, Table I and the current phase."""
     assert LAYERS["motion"] is MotionLayer
-    page.get_by_text("nodes plan.").first.wait_for(timeout=10_000)
+    page.get_by_text("nodes validating").first.wait_for(timeout=10_000)
     page.get_by_text("Grasp —").first.wait_for(timeout=10_000)
     shown = _settled(page)
     layer.visible = False

@@ -26,8 +26,8 @@ from ..scene_layer import OBJECT_COLOR
 from .base import StepLayer
 from .stages import FAILURE_COLOR
 
-PHASE_COLORS = ((0, 170, 170), (220, 40, 40), (200, 50, 200), (110, 110, 110))  # Grasp, Carry, Place, Rest
-PHASE_COLOR_NAMES = ("teal", "red", "magenta", "grey")
+PHASE_COLORS = ((0, 170, 170), (90, 60, 220), (200, 50, 200), (110, 110, 110))  # Grasp, Carry, Place, Rest
+PHASE_COLOR_NAMES = ("teal", "violet", "magenta", "grey")
 ROUTE_THICKNESS = 0.004  # m
 FPS = 30.0  # frames a second at most while playing (samples are skipped when the trajectory's rate or the speed is higher)
 SPEEDS = (0.1, 4.0)  # playback speed range (1 = real time)
@@ -48,18 +48,21 @@ def route_segments(result: Motion) -> tuple[np.ndarray, np.ndarray]:
 
 
 def table_one(result: Motion, seconds: list[float] | None) -> str:
-    """Table I of the session as markdown: per phase, nodes added planning / validating, the seconds of planning,
-    validating, shortcutting and contact motions (from the session record; '–' when absent), edges invalidated,
-    RRT calls, path length and duration."""
-    head = ("| phase | nodes plan. | nodes valid. | s plan. | s valid. | s shortcut | s contact | edges inval. | RRT calls "
-            "| length (rad) | duration (s) |\n|---|" + "---:|" * 10)
-    rows = []
-    for k, p in enumerate(result.phases):
-        secs = seconds[4 * k: 4 * k + 4] if seconds and len(seconds) >= 4 * k + 4 else None
-        cells = [f"{s:.3f}" for s in secs] if secs else ["–"] * 4
-        rows.append(f"| {p['phase']} | {p['nodes_planning']} | {p['nodes_validating']} | " + " | ".join(cells)
-                    + f" | {p['edges_invalidated']} | {p['rrt_calls']} | {p['path_length']:.2f} | {p['duration']:.2f} |")
-    return "\n".join([head, *rows])
+    """Table I of the session as markdown, one column per phase: nodes added planning / validating, the seconds of
+    planning, validating, shortcutting and contact motions (from the session record; '–' when absent), edges
+    invalidated, RRT calls, path length and duration."""
+    phases = result.phases
+    secs = seconds if seconds and len(seconds) >= 4 * len(phases) else None
+    rows = [("nodes planning", [str(p["nodes_planning"]) for p in phases]),
+            ("nodes validating", [str(p["nodes_validating"]) for p in phases])]
+    rows += [(f"s {stage}", [f"{secs[4 * k + j]:.3f}" if secs else "–" for k in range(len(phases))])
+             for j, stage in enumerate(STAGE_SECONDS)]
+    rows += [("edges invalidated", [str(p["edges_invalidated"]) for p in phases]),
+             ("RRT calls", [str(p["rrt_calls"]) for p in phases]),
+             ("length (rad)", [f"{p['path_length']:.2f}" for p in phases]),
+             ("duration (s)", [f"{p['duration']:.2f}" for p in phases])]
+    head = "| | " + " | ".join(p["phase"] for p in phases) + " |\n|---|" + "---:|" * len(phases)
+    return "\n".join([head, *(f"| {name} | " + " | ".join(cells) + " |" for name, cells in rows)])
 
 
 class MotionLayer(StepLayer):
