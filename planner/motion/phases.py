@@ -1,10 +1,12 @@
 """The four phases of the task (paper V-B) as pieces: transit motions on the Super Graph and contact motions.
 
-Grasp: transit to the pre-grasp (the picking hand backed off along its approach direction, fingers
-open), the fingers to their pre-shape, a straight approach, the fingers closing. Carry: the object
-lifted off its support, transit to the exchange with the placing hand at its pre-grasp, its approach
-and closing, then the picking hand opening and retreating. Place: transit with the placing hand to
-above the final placement, set down, open, retreat. Rest: transit to the final configuration.
+Grasp: transit to the pre-grasp (the picking hand backed off along its approach direction and raised,
+fingers open), the fingers to their pre-shape, a straight approach, the fingers closing. Carry: the
+object lifted off its support, transit to the exchange with the placing hand at its pre-grasp, its
+approach and closing, then the picking hand letting go (its touching fingers open part way) and
+retreating. Place: transit with the placing hand to above the final placement, set down, let go,
+retreat. Rest: transit to the final configuration, where both hands open fully (opened near the
+object, fingers that wrapped around it would hit it).
 Straight hand motions are IK waypoints of the arm and the torso; while the other hand holds the
 object, its palm is held still by the same IK, so the object does not move. Every piece is checked with the validity of its situation; a piece that fails
 raises `PieceFailed` naming the phase and the part.
@@ -68,8 +70,8 @@ class PhasePlanner:
         self.shape = coal_mesh(scene.object_mesh)
         self.data = self.robot.model.createData()
         self.stats = [TransitStats() for _ in PHASES]
-        self.transit_params = TransitParams(params.connections, params.max_searches, params.max_reconnections, params.rrt_time,
-                                            params.shortcut_attempts)
+        self.transit_params = TransitParams(params.connections, params.max_searches, params.max_reconnections,
+                                            params.reconnect_time, params.rrt_time, params.shortcut_attempts)
         robot = self.robot
         self.transit_idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
         self.open = robot.q_rest
@@ -112,9 +114,12 @@ class PhasePlanner:
         return np.array(out)
 
     def retreat(self, q: np.ndarray, arm: str, keep: str | None, hover: bool, phase: int, part: str) -> np.ndarray:
-        """IK polyline from q (the palm at a grasp) backing off along the approach direction, then rising by the lift
-        height when `hover` (the object rests on a support there, so the hand leaves upwards)."""
-        path = self.straight(q, arm, self.backoff(q, arm), keep, phase, part)
+        """IK polyline from q (the palm at a grasp) backing off along the approach direction (half as far when the arm
+        cannot go the whole way), then rising by the lift height when `hover` (the object rests on a support there)."""
+        try:
+            path = self.straight(q, arm, self.backoff(q, arm), keep, phase, part)
+        except PieceFailed:
+            path = self.straight(q, arm, 0.5 * self.backoff(q, arm), keep, phase, part)
         if hover:
             path = np.concatenate([path, self.straight(path[-1], arm, np.array([0.0, 0.0, self.p.lift]), keep, phase, part)[1:]])
         return path
@@ -129,10 +134,15 @@ class PhasePlanner:
         q[self.robot.hand_idx[arm]] = values
         return q
 
-    def preshape(self, grasp: HandGrasp) -> np.ndarray:
-        """Finger values between the grasp and the open hand (the pre-shape fraction of the way open)."""
-        open_ = self.open[self.robot.hand_idx[grasp.arm]]
-        return grasp.fingers + self.p.preshape * (open_ - grasp.fingers)
+    def opened(self, grasp: HandGrasp, fraction: float, touching_only: bool = False) -> np.ndarray:
+        """Finger values `fraction` of the way from the grasp to the open hand (only the touching fingers' when
+        `touching_only`: letting go, the others stay clear of the object where they are)."""
+        hand = self.robot.hand_idx[grasp.arm]
+        step = fraction * (self.open[hand] - grasp.fingers)
+        if touching_only:
+            moving = np.isin(hand, np.concatenate([self.robot.finger_idx[grasp.arm][f] for f in grasp.touching]))
+            step = np.where(moving, step, 0.0)
+        return grasp.fingers + step
 
     # ----- validity
     def validity(self, situation: Situation, profile: Profile, q: np.ndarray, moving: np.ndarray) -> Validity:
@@ -146,10 +156,11 @@ class PhasePlanner:
         """A short motion near the object, checked with the contact profile."""
         t = time.perf_counter()
         moving = np.flatnonzero(np.ptp(path, axis=0) > 0)
-        ok = self.validity(situation, self.contact_profile, path[0], moving).path_valid(path)
+        validity = self.validity(situation, self.contact_profile, path[0], moving)
+        ok = validity.path_valid(path)
         self.stats[phase].seconds_contact += time.perf_counter() - t
         if not ok:
-            raise PieceFailed(phase, part, "collides (contact profile)")
+            raise PieceFailed(phase, part, f"collides ({_pairs(validity.first_collision(path))})")
         return Piece(phase, part, np.asarray(path), situation)
 
     def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
@@ -168,7 +179,7 @@ class PhasePlanner:
         full = self.validity(situation, self.transit_profile, q_start, self.transit_idx)
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not full.state_valid(q):
-                raise PieceFailed(phase, "transit", f"its {name} configuration collides (transit profile)")
+                raise PieceFailed(phase, "transit", f"its {name} configuration collides ({_pairs(full.first_collision(q[None]))})")
         stats = self.stats[phase]
         try:
             if self.baseline:
@@ -204,7 +215,7 @@ class PhasePlanner:
         support_i, support_f = self.supports(oi), self.supports(of)
 
         # Grasp
-        pre_a = self.preshape(a)
+        pre_a, let_a = self.opened(a, p.preshape), self.opened(a, p.release, True)
         approach = self.retreat(self.with_fingers(q_grasp, a.arm, pre_a), a.arm, None, True, 0, "pre-grasp")[::-1]
         q_pre = self.with_fingers(approach[0], a.arm, open_a)
         pieces.append(self.transit(0, scene.q_initial, q_pre, static_i))
@@ -215,7 +226,7 @@ class PhasePlanner:
         # Carry
         lift = self.straight(pieces[-1].path[-1], a.arm, up, None, 1, "lift")
         pieces.append(self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i)))
-        pre_b = self.preshape(b)
+        pre_b, let_b = self.opened(b, p.preshape), self.opened(b, p.release, True)
         q_x = self.with_fingers(q_exch, a.arm, a.fingers)
         approach_b = self.retreat(self.with_fingers(q_x, b.arm, pre_b), b.arm, a.arm, False, 1, "exchange pre-grasp")[::-1]
         q_pre_b = self.with_fingers(approach_b[0], b.arm, open_b)
@@ -224,24 +235,25 @@ class PhasePlanner:
         pieces.append(self.contact(1, "approach", approach_b, held_a))
         pieces += self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
         released = Situation(b.arm, g_b, tips_a)
-        pieces += self.fingers(1, "opening", pieces[-1].path[-1], a.arm, pre_a, released)
+        pieces += self.fingers(1, "opening", pieces[-1].path[-1], a.arm, let_a, released)
         retreat_a = self.retreat(pieces[-1].path[-1], a.arm, b.arm, False, 1, "retreat")
         pieces.append(self.contact(1, "retreat", retreat_a, released))
-        pieces += self.fingers(1, "opening", retreat_a[-1], a.arm, open_a, held_b)
 
-        # Place
-        q_down = self.with_fingers(q_place, a.arm, open_a)
+        # Place (the picking hand keeps its fingers as they let go until the end: opened near the object, they hit it)
+        q_down = self.with_fingers(q_place, a.arm, let_a)
         lower = self.straight(q_down, b.arm, up, None, 2, "above the placement")[::-1]
         pieces.append(self.transit(2, pieces[-1].path[-1], lower[0], held_b))
         pieces.append(self.contact(2, "set-down", lower, Situation(b.arm, g_b, (), support_f)))
         let_go = Situation(None, of, tips_b)
-        pieces += self.fingers(2, "opening", lower[-1], b.arm, pre_b, let_go)
+        pieces += self.fingers(2, "opening", lower[-1], b.arm, let_b, let_go)
         retreat_b = self.retreat(pieces[-1].path[-1], b.arm, None, True, 2, "retreat")
         pieces.append(self.contact(2, "retreat", retreat_b, let_go))
-        pieces += self.fingers(2, "opening", retreat_b[-1], b.arm, open_b, static_f)
 
-        # Rest
-        pieces.append(self.transit(3, pieces[-1].path[-1], scene.q_final, static_f))
+        # Rest: to the final configuration, then both hands open
+        q_end = self.with_fingers(self.with_fingers(scene.q_final, a.arm, let_a), b.arm, let_b)
+        pieces.append(self.transit(3, pieces[-1].path[-1], q_end, static_f))
+        if not np.allclose(q_end, scene.q_final):
+            pieces.append(self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f))
         return pieces
 
     def supports(self, pose: np.ndarray) -> tuple[str, ...]:
@@ -253,3 +265,9 @@ class PhasePlanner:
             if coal.distance(self.shape, transform3s(pose), ob.coal_shape(), transform3s(ob.pose), req, res) < 0.005:
                 out.append(ob.name)
         return tuple(out)
+
+
+def _pairs(pairs: list[tuple[str, str]], most: int = 3) -> str:
+    """Colliding pairs in words, for failure messages."""
+    text = ", ".join(f"{a} with {b}" for a, b in pairs[:most])
+    return text + (f" and {len(pairs) - most} more pairs" if len(pairs) > most else "")

@@ -13,9 +13,10 @@ PHASES = ("Grasp", "Carry", "Place", "Rest")
 @dataclass(frozen=True)
 class MotionParams:
     planner: str = "roadmap"  # 'roadmap' (Super Graph, lazy revalidation, RRT reconnection) or 'rrt' (RRTConnect alone: the baseline)
-    pregrasp_distance: float = 0.08  # m: a hand backs off this far along its approach direction before it approaches
+    pregrasp_distance: float = 0.06  # m: a hand backs off this far along its approach direction before it approaches
     lift: float = 0.06  # m: the object is lifted off and set down vertically by this much
     preshape: float = 1.0  # fingers before an approach: this fraction of the way from the grasp to the open hand
+    release: float = 0.6  # fingers letting go: this fraction of the way open before the hand retreats (then fully open)
     straight_steps: int = 4  # IK waypoints on each straight hand motion
     max_velocity: float = 1.0  # rad/s: joint speeds are capped here (and by the robot's own limits)
     max_acceleration: float = 2.0  # rad/s^2
@@ -23,11 +24,12 @@ class MotionParams:
     connections: int = 8  # transit: graph nodes each end is joined to
     max_searches: int = 60  # transit: graph searches after invalidations before reconnecting
     max_reconnections: int = 4  # transit: RRTConnect calls per query
-    rrt_time: float = 30.0  # s: limit of one RRTConnect call
+    reconnect_time: float = 5.0  # s: limit of one RRTConnect reconnection
+    rrt_time: float = 30.0  # s: limit of one RRTConnect query of the baseline planner ('rrt')
     shortcut_attempts: int = 24  # random shortcuts per transit
     max_double_grasps: int = 6  # double grasps tried, best first
-    transit_env_padding: float = 0.02  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's)
-    transit_self_padding: float = 0.008  # m: robot-robot and robot-object pairs likewise
+    transit_env_padding: float = 0.015  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's)
+    transit_self_padding: float = 0.002  # m: robot-robot and robot-object pairs likewise
     contact_env_padding: float = 0.008  # m: contact motions (approach, closing, lift ...) keep obstacles this far at checks
     contact_env_clearance: float = 0.004  # m: ... and this far between checks
     contact_penetration: float = 0.001  # m: hand-object pairs touch at most (0 at checks, this deep between checks)

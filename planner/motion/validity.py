@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from ..collision import CollisionModel
-from ..roadmap.local_planner import SegmentChecker
+from ..roadmap.local_planner import SegmentChecker, van_der_corput
 
 
 class StateValidity(Protocol):
@@ -87,6 +87,19 @@ class Validity:
     def motion_valid(self, qa: np.ndarray, qb: np.ndarray, ends: bool = True) -> bool:
         """Every check of the straight segment passes (`ends=False`: both ends are known valid)."""
         return self.seg.segment_free(qa, qb, self.subset, ends)
+
+    def samples(self, qa: np.ndarray, qb: np.ndarray) -> int:
+        """How many evenly spaced configurations a segment is checked at (its resolution)."""
+        return int(self.seg.steps(qa, qb, self.subset)[0])
+
+    def first_collision(self, path: np.ndarray) -> list[tuple[str, str]]:
+        """The colliding pairs at the first configuration of a polyline that fails its checks (for messages)."""
+        for a, b in zip(path[:-1], path[1:]):
+            for s in van_der_corput(self.samples(a, b)):
+                pairs = self.seg.checker.colliding_pairs(a + s * (b - a), self.subset)
+                if pairs:
+                    return pairs
+        return self.seg.checker.colliding_pairs(path[-1], self.subset)
 
     def path_valid(self, path: np.ndarray) -> bool:
         """Every state and every segment of a polyline."""

@@ -1,0 +1,159 @@
+"""The motion's building blocks: timing under limits, the joint space, the object in the collision model, lazy transit.
+
+The lazy-transit test uses the example session's Super Graph and puts the statuette, as a static
+obstacle, in the middle of the path the graph returns without it: the planner must invalidate edges
+and come back with a path that an independent re-check (every segment at ten times the resolution,
+every pair of the situation) finds free.
+"""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner.motion.space import JointSpace
+from planner.motion.timing import sample_polyline, segment_duration
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
+
+
+def test_trapezoid_durations_analytic():
+    vmax, amax = np.array([1.0, 2.0]), np.array([2.0, 2.0])
+    # joint 0 moves 2 rad: cruise at 1 rad/s after 0.5 s of acceleration -> 0.5 + 1.5 + 0.5 = 2.5 s
+    assert segment_duration(np.array([2.0, 0.0]), vmax, amax)[0] == pytest.approx(2.5)
+    # 0.2 rad never reaches the speed limit: triangle, 2 sqrt(0.2 / 2) s
+    assert segment_duration(np.array([0.2, 0.0]), vmax, amax)[0] == pytest.approx(2 * np.sqrt(0.1))
+
+
+def test_sampled_polyline_respects_limits_and_hits_waypoints():
+    rng = np.random.default_rng(3)
+    path = np.cumsum(rng.normal(0, 0.6, (6, 4)), axis=0)
+    vmax, amax, dt = np.array([1.0, 0.5, 2.0, 1.5]), np.array([2.0, 1.0, 3.0, 2.5]), 1 / 50
+    seg, q = sample_polyline(path, vmax, amax, dt)
+    q = np.concatenate([path[:1], q])
+    v = np.diff(q, axis=0) / dt
+    assert np.all(np.abs(v) <= vmax * (1 + 1e-9))
+    # second differences of a C1 motion whose acceleration is bounded by amax are bounded by amax dt^2
+    a = np.diff(v, axis=0) / dt
+    assert np.all(np.abs(a) <= amax * (1 + 1e-6))
+    for w in path[1:]:
+        assert np.min(np.linalg.norm(q - w, axis=1)) < 1e-12
+    # every sample lies on its segment
+    for k, qi in zip(seg, q[1:]):
+        a0, b0 = path[k], path[k + 1]
+        s = np.dot(qi - a0, b0 - a0) / np.dot(b0 - a0, b0 - a0)
+        assert -1e-12 <= s <= 1 + 1e-12 and np.allclose(a0 + s * (b0 - a0), qi)
+
+
+def test_joint_space_holds_and_reduces():
+    base = np.arange(6.0)
+    space = JointSpace.of(np.full(6, -10.0), np.full(6, 10.0), np.array([1, 3]), base)
+    q = space.full(np.array([[7.0, 8.0]]))[0]
+    assert q.tolist() == [0.0, 7.0, 2.0, 8.0, 4.0, 5.0]
+    assert space.holds(q) and not space.holds(q + 1)
+    assert space.distance(base, q) == pytest.approx(np.hypot(6.0, 5.0))
+    with pytest.raises(ValueError):
+        space.base[0] = 1.0
+
+
+@pytest.fixture(scope="module")
+def example(tmp_path_factory):
+    from planner.session import Session
+
+    folder = tmp_path_factory.mktemp("motion") / "example"
+    shutil.copytree(EXAMPLE, folder)
+    s = Session.open(folder)
+    return s.scene, s.result("roadmap"), s.result("pick_grasps")
+
+
+def _fcl_hits(scene, q, object_pose) -> bool:
+    """Independent oracle: every robot link of the URDFs' collision models (full meshes, not hulls; boxes, cylinders and
+    spheres) against the object's mesh, through python-fcl."""
+    import fcl
+    import pinocchio as pin
+
+    robot = scene.robot
+    data = robot.model.createData()
+    gdata = pin.GeometryData(robot.collision_model)
+    pin.updateGeometryPlacements(robot.model, data, robot.collision_model, gdata, q)
+    mesh = scene.object_mesh
+    bvh = fcl.BVHModel()
+    bvh.beginModel(len(mesh.vertices), len(mesh.faces))
+    bvh.addSubModel(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int32))
+    bvh.endModel()
+    obj = fcl.CollisionObject(bvh, fcl.Transform(object_pose[:3, :3], object_pose[:3, 3]))
+    for g, go in enumerate(robot.collision_model.geometryObjects):
+        if go.parentJoint == 0:
+            continue
+        geom = go.geometry
+        if hasattr(geom, "vertices"):
+            v = np.asarray(geom.vertices()) * np.asarray(go.meshScale)
+            tris = np.array([[t[0], t[1], t[2]] for t in (geom.tri_indices(i) for i in range(geom.num_tris))], np.int32)
+            m = fcl.BVHModel()
+            m.beginModel(len(v), len(tris))
+            m.addSubModel(v, tris)
+            m.endModel()
+        elif hasattr(geom, "halfSide"):
+            m = fcl.Box(*(2 * np.asarray(geom.halfSide)))
+        elif hasattr(geom, "halfLength"):
+            m = fcl.Cylinder(geom.radius, 2 * geom.halfLength)
+        else:
+            m = fcl.Sphere(geom.radius)
+        T = gdata.oMg[g]
+        link = fcl.CollisionObject(m, fcl.Transform(T.rotation, T.translation))
+        if fcl.collide(link, obj, fcl.CollisionRequest(), fcl.CollisionResult()):
+            return True
+    return False
+
+
+@pytest.mark.slow
+def test_lazy_transit_goes_around_the_object(example):
+    from planner.collision import build_collision_model
+    from planner.geometry import coal_mesh
+    from planner.motion.graph import MotionGraph
+    from planner.motion.situation import Situation, situation_model
+    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+    from planner.motion.validity import make_validity, transit_profile
+
+    scene, roadmap, _ = example
+    robot = scene.robot
+    cm = build_collision_model(robot, scene.environment)
+    idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
+    profile = transit_profile(roadmap.resolution, 0.02, 0.008)
+    shape = coal_mesh(scene.object_mesh)
+    big = int(np.bincount(roadmap.node_component).argmax())
+    nodes = np.flatnonzero(roadmap.node_component == big)
+    q_start, q_goal = scene.q_initial, roadmap.node_q[nodes[np.argmax(np.linalg.norm(roadmap.wrists[nodes, 0] - roadmap.wrists[nodes[0], 0], axis=1))]]
+    space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
+    free = make_validity(situation_model(cm, shape, Situation(None, np.diag([1.0, 1, 1, 1]) @ _far()), (), idx), profile, "moving")
+    first = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, TransitParams(), np.random.default_rng(0),
+                        TransitStats()).query(q_start, q_goal)
+    # the object where the first path's wrist passes, half way along
+    mid = first[len(first) // 2]
+    import pinocchio as pin
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, mid)
+    wrist = data.oMf[robot.frame_id(robot.spec.arm(robot.spec.arm_names[0]).hand.mount_frame)].translation
+    pose = np.eye(4)
+    pose[:3, 3] = wrist - np.asarray(scene.object_mesh.center_mass)
+    situation = Situation(None, pose)
+    blocked = make_validity(situation_model(cm, shape, situation, (), idx), profile, "moving")
+    assert not blocked.state_valid(mid), "the object must block the first path"
+    stats = TransitStats()
+    path = LazyTransit(MotionGraph(roadmap), space, blocked.on("changed"), blocked, TransitParams(), np.random.default_rng(0),
+                       stats).query(q_start, q_goal)
+    assert stats.searches > 1, "the first path must have been rejected and the graph searched again"
+    assert not np.any(np.all(np.isclose(path, mid), axis=1)), "the blocked configuration is not on the new path"
+    assert np.allclose(path[0], q_start) and np.allclose(path[-1], q_goal)
+    for a, b in zip(path[:-1], path[1:]):
+        for s in np.linspace(0, 1, 10 * blocked.samples(a, b)):
+            q = a + s * (b - a)
+            assert not _fcl_hits(scene, q, pose)
+
+
+def _far() -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = [5.0, 5.0, 5.0]
+    return T
