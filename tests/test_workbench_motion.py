@@ -177,6 +177,7 @@ def test_play_advances_the_timeline(workbench: Workbench, page: Page, layer: Mot
     """Play moves the timeline on (robot meshes only: the joint sliders are not rebuilt); Pause stops it with the robot
     fully posed at the shown sample."""
     layer.seek(0)
+    layer.speed.value = 4.0
     before = _settled(page)
     sliders = dict(workbench._slider_of)
     page.get_by_role("button", name="Play", exact=True).click()
@@ -193,6 +194,7 @@ def test_play_advances_the_timeline(workbench: Workbench, page: Page, layer: Mot
         assert _changed(_settled(page), before) > CHANGED, "playing changed nothing on screen"
     finally:
         layer.pause()
+        layer.speed.value = 1.0
         layer.seek(0)
 
 
