@@ -221,3 +221,15 @@ def test_exported_html_animates(page: Page, layer: MotionLayer, browser: Browser
             assert _wait_for(lambda shot=shot: _changed(_scene(exported), shot) > CHANGED, 20), "the exported page does not animate"
     finally:
         exported.close()
+
+
+def test_playback_stops_when_the_layer_is_removed(workbench: Workbench, layer: MotionLayer) -> None:
+    """Redrawing the session replaces the layer: its playback thread ends and leaves the robot alone."""
+    job = layer.play()
+    assert job is not None and _wait_for(lambda: layer.index > 0), "the playback did not start"
+    workbench.show_session(workbench.session)
+    job.join(10)
+    assert not job.is_alive() and not layer.playing, "the playback outlived its layer"
+    q = workbench.q.copy()
+    time.sleep(0.5)
+    assert np.array_equal(workbench.q, q) and workbench.session_layers.layers["motion"] is not layer

@@ -74,7 +74,6 @@ class MotionLayer(StepLayer):
         self.result: Motion | None = None
         self.index = 0  # the sample shown
         self.playing = False
-        self.job: threading.Thread | None = None
         self.object: viser.FrameHandle | None = None
         self.routes: viser.LineSegmentsHandle | None = None
         self.timeline: viser.GuiSliderHandle | None = None
@@ -83,7 +82,6 @@ class MotionLayer(StepLayer):
         self.jump: viser.GuiButtonGroupHandle | None = None
         self.now: viser.GuiMarkdownHandle | None = None
         self.export_button: viser.GuiButtonHandle | None = None
-        self.exporting: threading.Thread | None = None
         self._generation = 0  # bumped to stop a running playback
         self._frame_lock = threading.Lock()  # a playback frame and pause / removal never interleave
 
@@ -225,9 +223,9 @@ class MotionLayer(StepLayer):
             self.playing = True
         if self.play_button is not None:
             self.play_button.label = "Pause"
-        self.job = threading.Thread(target=self._run, args=(self._generation,), daemon=True)
-        self.job.start()
-        return self.job
+        job = threading.Thread(target=self._run, args=(self._generation,), daemon=True)
+        job.start()
+        return job
 
     def pause(self) -> None:
         """Stop playing; the robot is then posed fully at the shown sample (sliders and collisions follow)."""
@@ -266,8 +264,9 @@ class MotionLayer(StepLayer):
                         continue
                     self.playing = False
                 break
-            self.play_button.label = "Play"
-            self.show(self.index)  # at the end: the robot fully posed
+            if generation == self._generation:  # neither removed nor restarted since the last frame
+                self.play_button.label = "Play"
+                self.show(self.index)  # at the end: the robot fully posed
         except RuntimeError:  # a handle was removed under us (the layer or the robot was replaced): nothing left to draw
             return
 
@@ -278,9 +277,9 @@ class MotionLayer(StepLayer):
         if self.session is None or client is None or self.export_button is None or self.export_button.disabled:
             return None
         self.export_button.disabled = True
-        self.exporting = threading.Thread(target=self._export, args=(client, self.session, self.export_button), daemon=True)
-        self.exporting.start()
-        return self.exporting
+        job = threading.Thread(target=self._export, args=(client, self.session, self.export_button), daemon=True)
+        job.start()
+        return job
 
     @staticmethod
     def _export(client: viser.ClientHandle, session: Session, button: viser.GuiButtonHandle) -> None:
