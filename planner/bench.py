@@ -124,3 +124,95 @@ def bench_double_grasps(scene: Scene, seed: int, repeat: int, folder, progress=p
         stages = [(name, branch.result(name).stages, branch.record_of(name).get("stage_seconds", [])) for name in ONLINE_STEPS]
         progress(f"run {i + 1}/{repeat}: {sum(runs[-1].values()):.3f} s, {counts[-1]} double grasps")
     return DoubleGraspBench(runs, counts, stages)
+
+
+@dataclass(frozen=True)
+class MotionBench:
+    """The motion step over seeds with the Super Graph (ours) and with RRTConnect alone (the baseline), Table I for each."""
+
+    seeds: list
+    runs: dict  # planner -> per seed: {"seconds", "success", "double_grasp", "phases": Table I rows, "phase_seconds"}
+
+    def to_dict(self) -> dict:
+        ours, rrt = (self.summary(p) for p in ("roadmap", "rrt"))
+        return {"seeds": self.seeds, "ours_total_seconds_median": ours["seconds"], "rrt_total_seconds_median": rrt["seconds"],
+                "speedup": rrt["seconds"] / ours["seconds"] if ours["seconds"] > 0 else None,
+                "ours_success": ours["success"], "rrt_success": rrt["success"],
+                "phases": {"ours": ours["phases"], "rrt": rrt["phases"]}, "runs": self.runs}
+
+    def summary(self, planner: str) -> dict:
+        """Medians over the seeds: total seconds, success fraction, and per phase Table I's figures."""
+        from .motion import PHASES
+
+        runs = self.runs[planner]
+        phases = []
+        for i, name in enumerate(PHASES):
+            ok = [r for r in runs if r["phases_done"] > i]
+            rows = [r["phases"][i] for r in runs if r["phases"]]
+            phases.append({"phase": name, "success": len(ok) / len(runs),
+                           "nodes_planning": _median([r["nodes_planning"] for r in rows]),
+                           "nodes_validating": _median([r["nodes_validating"] for r in rows]),
+                           "seconds_planning": _median([r["phase_seconds"][4 * i] for r in runs if r["phase_seconds"]]),
+                           "seconds_validating": _median([r["phase_seconds"][4 * i + 1] for r in runs if r["phase_seconds"]]),
+                           "seconds": _median([sum(r["phase_seconds"][4 * i: 4 * i + 4]) for r in runs if r["phase_seconds"]]),
+                           "edges_invalidated": _median([r["edges_invalidated"] for r in rows]),
+                           "rrt_calls": _median([r["rrt_calls"] for r in rows]),
+                           "path_length": _median([r["path_length"] for r in rows]), "duration": _median([r["duration"] for r in rows])})
+        return {"seconds": _median([r["seconds"] for r in runs]), "success": sum(r["success"] for r in runs) / len(runs),
+                "phases": phases}
+
+    def render(self) -> str:
+        out = []
+        for planner, title in (("roadmap", "ours: Super Graph, lazy revalidation, RRT reconnection"), ("rrt", "RRTConnect alone")):
+            s = self.summary(planner)
+            out += [f"{title}: median {s['seconds']:.2f} s over {len(self.seeds)} seeds, success {s['success']:.0%}",
+                    f"{'phase':<7}{'nodes plan':>11}{'s plan':>8}{'nodes val':>10}{'s val':>8}{'invalid':>8}{'RRT':>5}"
+                    f"{'s total':>9}{'success':>8}{'length':>8}{'duration':>9}"]
+            for r in s["phases"]:
+                out.append(f"{r['phase']:<7}{r['nodes_planning']:>11.0f}{r['seconds_planning']:>8.2f}{r['nodes_validating']:>10.0f}"
+                           f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['rrt_calls']:>5.0f}{r['seconds']:>9.2f}"
+                           f"{r['success']:>8.0%}{r['path_length']:>8.2f}{r['duration']:>9.2f}")
+            out.append("")
+        d = self.to_dict()
+        out.append(f"speedup (RRTConnect median / ours): {d['speedup']:.2f}" if d["speedup"] else "speedup: n/a")
+        return "\n".join(out)
+
+
+def _median(values: list) -> float:
+    return float(np.median(values)) if values else float("nan")
+
+
+def bench_motion(scene: Scene, seeds: int, folder, progress=print) -> MotionBench:
+    """The offline steps once (seed 0, from the cache when there); per seed the online steps, then the motion planned with
+    the Super Graph and with RRTConnect alone from the same double grasps (rank order and contact motions are shared)."""
+    from .motion import PHASES, MotionParams, plan_motion
+    from .pipeline import step_named
+    from .runner import run_pipeline
+    from .session import Session
+    from .steps import StepContext, step_seed
+
+    base = Session.create(folder / "base", scene, 0)
+    progress("offline steps: grasp lists and roadmap (from the user cache when computed before) ...")
+    run_pipeline(base, until="roadmap")
+    offline = {name: base.result(name) for name in ("arms", "pick_grasps", "place_grasps", "roadmap")}
+    runs: dict = {"roadmap": [], "rrt": []}
+    for seed in range(seeds):
+        results = dict(offline)
+        for name in ONLINE_STEPS:
+            step = step_named(name)
+            ctx = StepContext(scene, {n: results[n] for n in step.needs}, step.make_params(),
+                              np.random.default_rng(step_seed(seed, name)))
+            results[name] = step.run(ctx)
+        for planner in runs:
+            start = time.perf_counter()
+            motion, seconds = plan_motion(scene, results["pick_grasps"], results["place_grasps"], results["double_grasps"],
+                                          results["roadmap"], MotionParams(planner=planner),
+                                          np.random.default_rng(step_seed(seed, "motion")))
+            elapsed = time.perf_counter() - start
+            failed = next((why for why in motion.tried if why), "")
+            done = len(PHASES) if not motion.failure else next(i for i, n in enumerate(PHASES) if failed.startswith(n))
+            runs[planner].append({"seed": seed, "seconds": elapsed, "success": not motion.failure, "double_grasp": motion.double_grasp,
+                                  "phases": motion.phases, "phase_seconds": seconds, "phases_done": done,
+                                  "failure": motion.failure})
+            progress(f"seed {seed} {planner}: {elapsed:.2f} s, {'ok' if not motion.failure else motion.failure[:120]}")
+    return MotionBench(list(range(seeds)), runs)

@@ -63,6 +63,21 @@ def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_motion(args: argparse.Namespace) -> int:
+    import tempfile
+
+    from .bench import bench_motion
+    from .task import load_task
+
+    scene = load_task(args.task)
+    with tempfile.TemporaryDirectory(prefix="regrasp-bench-") as tmp:
+        result = bench_motion(scene, args.seeds, Path(tmp), lambda m: print(m, file=sys.stderr))
+    print(result.render())
+    if args.json:
+        _write_json(Path(args.json), result.to_dict())
+    return 0
+
+
 def _cmd_plan(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -281,6 +296,11 @@ def parser() -> argparse.ArgumentParser:
     bd.add_argument("--repeat", type=int, default=5)
     bd.add_argument("--json", help="also write the figures to this JSON file")
     bd.set_defaults(func=_cmd_bench_double_grasps)
+    bm = bsub.add_parser("motion", help="Table I: the motion over seeds with the Super Graph and with RRTConnect alone")
+    bm.add_argument("--task", default=str(DEFAULT_TASK))
+    bm.add_argument("--seeds", type=int, default=10, help="online seeds 0..N-1 (the grasp lists and roadmap: seed 0, cached)")
+    bm.add_argument("--json", help="also write the figures to this JSON file")
+    bm.set_defaults(func=_cmd_bench_motion)
     return p
 
 

@@ -30,7 +30,7 @@ from .result import PHASES
 from .situation import Situation, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
-from .validity import Profile, Validity, make_validity
+from .validity import Profile, clearances, fitted, make_validity
 
 
 
@@ -42,6 +42,7 @@ class Piece:
     part: str
     path: np.ndarray  # (k, nq), k >= 2
     situation: Situation
+    hand: str | None = None  # the arm whose hand works near the object in a contact motion (None: transit)
 
 
 class PieceFailed(Exception):
@@ -70,8 +71,8 @@ class PhasePlanner:
         self.shape = coal_mesh(scene.object_mesh)
         self.data = self.robot.model.createData()
         self.stats = [TransitStats() for _ in PHASES]
-        self.transit_params = TransitParams(params.connections, params.max_searches, params.max_reconnections,
-                                            params.reconnect_time, params.rrt_time, params.shortcut_attempts)
+        self.transit_params = TransitParams(params.connections, params.max_connections, params.max_searches, params.max_reconnections,
+                                            params.reconnect_time, params.rrt_time, params.rrt_step, params.shortcut_attempts)
         robot = self.robot
         self.transit_idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
         self.open = robot.q_rest
@@ -145,30 +146,30 @@ class PhasePlanner:
         return grasp.fingers + step
 
     # ----- validity
-    def validity(self, situation: Situation, profile: Profile, q: np.ndarray, moving: np.ndarray) -> Validity:
-        """Validity of a situation over the pairs the coordinates `moving` change; the hands not at the roadmap's open
-        values at q are those whose pairs 'changed'."""
+    def model(self, situation: Situation, q: np.ndarray, moving: np.ndarray) -> CollisionModel:
+        """The situation's collision model; the hands not at the roadmap's open values at q are those whose pairs
+        'changed', and 'moving' has the pairs the coordinates `moving` change."""
         moved = tuple(a for a in self.robot.spec.arm_names
                       if not np.allclose(q[self.robot.hand_idx[a]], self.open[self.robot.hand_idx[a]]))
-        return make_validity(situation_model(self.cm, self.shape, situation, moved, moving), profile, "moving")
+        return situation_model(self.cm, self.shape, situation, moved, moving)
 
-    def contact(self, phase: int, part: str, path: np.ndarray, situation: Situation) -> Piece:
+    def contact(self, phase: int, part: str, path: np.ndarray, situation: Situation, hand: str | None) -> Piece:
         """A short motion near the object, checked with the contact profile."""
         t = time.perf_counter()
         moving = np.flatnonzero(np.ptp(path, axis=0) > 0)
-        validity = self.validity(situation, self.contact_profile, path[0], moving)
+        validity = make_validity(self.model(situation, path[0], moving), self.contact_profile, "moving")
         ok = validity.path_valid(path)
         self.stats[phase].seconds_contact += time.perf_counter() - t
         if not ok:
             raise PieceFailed(phase, part, f"collides ({_pairs(validity.first_collision(path))})")
-        return Piece(phase, part, np.asarray(path), situation)
+        return Piece(phase, part, np.asarray(path), situation, hand)
 
     def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
         """The hand's fingers moving to `values` (nothing when they are there)."""
         target = self.with_fingers(q, arm, values)
         if np.allclose(target, q):
             return []
-        return [self.contact(phase, part, np.stack([q, target]), situation)]
+        return [self.contact(phase, part, np.stack([q, target]), situation, arm)]
 
     def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation) -> Piece:
         """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline)."""
@@ -176,7 +177,10 @@ class PhasePlanner:
         space = JointSpace.of(robot.lower, robot.upper, self.transit_idx, q_start)
         if not space.holds(q_goal):
             raise ValueError("transit ends must agree on every joint outside the torso and arms")
-        full = self.validity(situation, self.transit_profile, q_start, self.transit_idx)
+        model = self.model(situation, q_start, self.transit_idx)
+        ends = [clearances(model, q, "moving") for q in (q_start, q_goal)]
+        profile = fitted(self.transit_profile, {k: min(e[k] for e in ends) for k in ends[0]})
+        full = make_validity(model, profile, "moving")
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not full.state_valid(q):
                 raise PieceFailed(phase, "transit", f"its {name} configuration collides ({_pairs(full.first_collision(q[None]))})")
@@ -220,40 +224,40 @@ class PhasePlanner:
         q_pre = self.with_fingers(approach[0], a.arm, open_a)
         pieces.append(self.transit(0, scene.q_initial, q_pre, static_i))
         pieces += self.fingers(0, "pre-shape", q_pre, a.arm, pre_a, static_i)
-        pieces.append(self.contact(0, "approach", approach, static_i))
+        pieces.append(self.contact(0, "approach", approach, static_i, a.arm))
         pieces += self.fingers(0, "closing", approach[-1], a.arm, a.fingers, Situation(None, oi, tips_a))
 
         # Carry
         lift = self.straight(pieces[-1].path[-1], a.arm, up, None, 1, "lift")
-        pieces.append(self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i)))
+        pieces.append(self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i), a.arm))
         pre_b, let_b = self.opened(b, p.preshape), self.opened(b, p.release, True)
         q_x = self.with_fingers(q_exch, a.arm, a.fingers)
         approach_b = self.retreat(self.with_fingers(q_x, b.arm, pre_b), b.arm, a.arm, False, 1, "exchange pre-grasp")[::-1]
         q_pre_b = self.with_fingers(approach_b[0], b.arm, open_b)
         pieces.append(self.transit(1, lift[-1], q_pre_b, held_a))
         pieces += self.fingers(1, "pre-shape", q_pre_b, b.arm, pre_b, held_a)
-        pieces.append(self.contact(1, "approach", approach_b, held_a))
+        pieces.append(self.contact(1, "approach", approach_b, held_a, b.arm))
         pieces += self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
         released = Situation(b.arm, g_b, tips_a)
         pieces += self.fingers(1, "opening", pieces[-1].path[-1], a.arm, let_a, released)
         retreat_a = self.retreat(pieces[-1].path[-1], a.arm, b.arm, False, 1, "retreat")
-        pieces.append(self.contact(1, "retreat", retreat_a, released))
+        pieces.append(self.contact(1, "retreat", retreat_a, released, a.arm))
 
         # Place (the picking hand keeps its fingers as they let go until the end: opened near the object, they hit it)
         q_down = self.with_fingers(q_place, a.arm, let_a)
         lower = self.straight(q_down, b.arm, up, None, 2, "above the placement")[::-1]
         pieces.append(self.transit(2, pieces[-1].path[-1], lower[0], held_b))
-        pieces.append(self.contact(2, "set-down", lower, Situation(b.arm, g_b, (), support_f)))
+        pieces.append(self.contact(2, "set-down", lower, Situation(b.arm, g_b, (), support_f), b.arm))
         let_go = Situation(None, of, tips_b)
         pieces += self.fingers(2, "opening", lower[-1], b.arm, let_b, let_go)
         retreat_b = self.retreat(pieces[-1].path[-1], b.arm, None, True, 2, "retreat")
-        pieces.append(self.contact(2, "retreat", retreat_b, let_go))
+        pieces.append(self.contact(2, "retreat", retreat_b, let_go, b.arm))
 
         # Rest: to the final configuration, then both hands open
         q_end = self.with_fingers(self.with_fingers(scene.q_final, a.arm, let_a), b.arm, let_b)
         pieces.append(self.transit(3, pieces[-1].path[-1], q_end, static_f))
         if not np.allclose(q_end, scene.q_final):
-            pieces.append(self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f))
+            pieces.append(self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f, None))
         return pieces
 
     def supports(self, pose: np.ndarray) -> tuple[str, ...]:

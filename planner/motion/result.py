@@ -21,15 +21,18 @@ class MotionParams:
     max_velocity: float = 1.0  # rad/s: joint speeds are capped here (and by the robot's own limits)
     max_acceleration: float = 2.0  # rad/s^2
     rate: float = 30.0  # Hz: the trajectory's sampling rate
-    connections: int = 8  # transit: graph nodes each end is joined to
+    connections: int = 8  # transit: graph nodes each end is joined to, a batch at a time ...
+    max_connections: int = 48  # ... while every edge of the end is invalid, up to this many
     max_searches: int = 60  # transit: graph searches after invalidations before reconnecting
     max_reconnections: int = 4  # transit: RRTConnect calls per query
     reconnect_time: float = 5.0  # s: limit of one RRTConnect reconnection
     rrt_time: float = 30.0  # s: limit of one RRTConnect query of the baseline planner ('rrt')
+    rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension, joint-space distance)
     shortcut_attempts: int = 24  # random shortcuts per transit
     max_double_grasps: int = 6  # double grasps tried, best first
-    transit_env_padding: float = 0.015  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's)
-    transit_self_padding: float = 0.002  # m: robot-robot and robot-object pairs likewise
+    transit_env_padding: float = 0.03  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's),
+    transit_self_padding: float = 0.015  # m: robot-robot and robot-object pairs likewise (both lowered per transit
+    # to what its two ends allow)
     contact_env_padding: float = 0.008  # m: contact motions (approach, closing, lift ...) keep obstacles this far at checks
     contact_env_clearance: float = 0.004  # m: ... and this far between checks
     contact_penetration: float = 0.001  # m: hand-object pairs touch at most (0 at checks, this deep between checks)
@@ -38,7 +41,7 @@ class MotionParams:
 @dataclass(frozen=True)
 class Motion:
     """A trajectory sampled at `rate`: time, configuration, phase (0..3: Grasp, Carry, Place, Rest), the object's world
-    pose and which arm holds it (-1: none), each wrist's position; `keyframes` are the samples at q_initial, q_grasp,
+    pose, which arm holds it (-1: none) and which arm's hand works at the object (-1: none), each wrist's position; `keyframes` are the samples at q_initial, q_grasp,
     q_exch, q_place and q_final. `phases` holds Table I's counts per phase (seconds are in the session record)."""
 
     planner: str
@@ -54,6 +57,7 @@ class Motion:
     phase: np.ndarray = array("int8", ("n",))
     object_pose: np.ndarray = array("float64", ("n", 4, 4))
     holder: np.ndarray = array("int8", ("n",))
+    active: np.ndarray = array("int8", ("n",))  # the arm whose hand works at the object (approach, closing, lift, ...), -1
     wrists: np.ndarray = array("float64", ("n", 2, 3))
     keyframes: np.ndarray = array("int64", (5,))
 

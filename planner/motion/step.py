@@ -75,7 +75,8 @@ def plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasp
 def _empty(p: MotionParams, robot, tried: list, resolution: dict, failure: str) -> Motion:
     nq = robot.nq
     return Motion(p.planner, -1, tried, [], list(robot.spec.arm_names), resolution, [], failure, np.zeros(0), np.zeros((0, nq)),
-                  np.zeros(0, np.int8), np.zeros((0, 4, 4)), np.zeros(0, np.int8), np.zeros((0, 2, 3)), np.zeros(5, np.int64))
+                  np.zeros(0, np.int8), np.zeros((0, 4, 4)), np.zeros(0, np.int8), np.zeros(0, np.int8), np.zeros((0, 2, 3)),
+                  np.zeros(5, np.int64))
 
 
 def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, resolution: dict, planner: PhasePlanner) -> Motion:
@@ -85,7 +86,7 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
     vmax = np.minimum(np.asarray(robot.model.velocityLimit, float), p.max_velocity)
     amax = np.full(robot.nq, p.max_acceleration)
     dt = 1.0 / p.rate
-    qs, phase, holder, poses, ends = [scene.q_initial[None]], [0], [-1], [scene.object_initial[None]], []
+    qs, phase, holder, active, poses, ends = [scene.q_initial[None]], [0], [-1], [-1], [scene.object_initial[None]], []
     data = robot.model.createData()
     palms = {a: robot.frame_id(robot.palm_frame(a)) for a in arms}
     mounts = [robot.frame_id(robot.spec.arm(a).hand.mount_frame) for a in arms]
@@ -101,6 +102,7 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
         qs.append(q)
         phase += [piece.phase] * len(q)
         holder += [arms.index(s.holder) if s.holder else -1] * len(q)
+        active += [arms.index(piece.hand) if piece.hand else -1] * len(q)
         ends.append(sum(len(x) for x in qs) - 1)
     pin.framesForwardKinematics(robot.model, data, scene.q_initial)
     wrists.insert(0, [data.oMf[m].translation.copy() for m in mounts])
@@ -126,7 +128,7 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
                    {"stage": f"{row['phase']}: approach, fingers, lift", "count": 0,
                     "note": f"path {row['path_length']:.2f} rad, {row['duration']:.2f} s"}]
     return Motion(p.planner, len(tried) - 1, tried, table, arms, resolution, stages, "", t, q, phase_arr, np.concatenate(poses),
-                  np.array(holder, np.int8), np.array(wrists), np.array(key, np.int64))
+                  np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64))
 
 
 def run(ctx: StepContext) -> Motion:

@@ -47,8 +47,9 @@ def sample_polyline(path: np.ndarray, vmax: np.ndarray, amax: np.ndarray, dt: fl
         n = max(1, math.ceil(duration / dt - 1e-9))
         tau = np.arange(1, n + 1) * (duration / n)  # the stretched clock, read on the original profile
         s = np.clip(_progress(tau, duration, v, a), 0.0, 1.0)
-        s[-1] = 1.0
-        out.append(qa + s[:, None] * dq)
+        q = qa + s[:, None] * dq
+        q[-1] = qb  # exactly, not qa + (qb - qa)
+        out.append(q)
         seg_of += [k] * n
     if not out:
         return np.zeros(0, dtype=np.int64), np.zeros((0, path.shape[1]))

@@ -26,11 +26,13 @@ from .validity import Validity
 
 @dataclass(frozen=True)
 class TransitParams:
-    connections: int = 8  # graph nodes each end is joined to (nearest first)
+    connections: int = 8  # graph nodes each end is joined to (nearest first) ...
+    max_connections: int = 48  # ... and more, a batch at a time, while all its edges are invalid
     max_searches: int = 60  # searches after invalidations before giving up
     max_reconnections: int = 4  # RRTConnect calls per transit
     reconnect_time: float = 5.0  # s per RRTConnect reconnection
     rrt_time: float = 30.0  # s per RRTConnect query of the baseline
+    rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension)
     shortcut_attempts: int = 24
 
 
@@ -53,11 +55,13 @@ class TransitFailed(Exception):
     """No transit path: `part` names what failed (for the step's failure message)."""
 
 
-def _rrt(space: JointSpace, full: Validity, qa: np.ndarray, qb: np.ndarray, seed: int, time_limit: float) -> np.ndarray | None:
-    """RRTConnect between two full configurations of the space with full validity; the path as full configurations."""
+def _rrt(space: JointSpace, full: Validity, qa: np.ndarray, qb: np.ndarray, seed: int, time_limit: float,
+         step: float) -> np.ndarray | None:
+    """RRTConnect between two full configurations of the space with full validity, extending by at most `step` (joint-space
+    distance; short steps keep each motion check cheap); the path as full configurations."""
     result = rrt_connect(space.lower, space.upper, lambda x: full.state_valid(space.full(x)),
                          lambda a, b: full.motion_valid(space.full(a), space.full(b), ends=False),
-                         space.reduce(qa), space.reduce(qb), seed=seed, time_limit=time_limit)
+                         space.reduce(qa), space.reduce(qb), seed=seed, time_limit=time_limit, range_=step)
     return space.full(result.path) if result.found else None
 
 
@@ -68,6 +72,7 @@ class LazyTransit:
                  rng: np.random.Generator, stats: TransitStats):
         self.graph, self.space, self.lazy, self.full, self.p, self.rng, self.stats = graph, space, lazy, full, params, rng, stats
         self.status = PhaseStatus(graph)
+        self.joined: dict[int, int] = {}  # query end -> how many nearest nodes it was joined to
 
     def _config(self, node: int) -> np.ndarray:
         """A graph node as a configuration of this phase (its hands as the phase holds them)."""
@@ -79,12 +84,31 @@ class LazyTransit:
 
     def _connect(self, q: np.ndarray) -> int:
         """Add q as a node joined (unchecked) to its nearest nodes; returns its id."""
-        d = self.space.distance(self.graph.q, q)
-        near = np.argsort(d, kind="stable")[: self.p.connections]
         node = int(self.graph.add_nodes(q)[0])
-        self.graph.add_edges([(node, int(k)) for k in near])
+        self.joined[node] = 0
+        self._join(node)
         self.stats.nodes_planning += 1
         return node
+
+    def _join(self, node: int) -> None:
+        """Join a query end (unchecked) to its next `connections` nearest nodes."""
+        d = self.space.distance(self.graph.q, self.graph.q[node])
+        d[node] = np.inf
+        order = np.argsort(d, kind="stable")
+        k = self.joined[node]
+        self.graph.add_edges([(node, int(n)) for n in order[k: k + self.p.connections]])
+        self.joined[node] = k + self.p.connections
+        self.status.grow()
+
+    def _widen(self, node: int) -> bool:
+        """When every edge of a query end is known invalid, join it to its next nearest nodes (up to
+        `max_connections`); True if it was widened."""
+        g = self.graph
+        mine = (g.edges[:, 0] == node) | (g.edges[:, 1] == node)
+        if np.any(self.status.usable() & mine) or self.joined[node] >= self.p.max_connections:
+            return False
+        self._join(node)
+        return True
 
     def _node_valid(self, n: int) -> bool:
         st = self.status
@@ -153,9 +177,14 @@ class LazyTransit:
                     continue
             if stats.rrt_calls >= self.p.max_reconnections:
                 break
+            if self._widen(start) | self._widen(goal):
+                weights = self._weights()
+                stats.seconds_validating += time.perf_counter() - t
+                continue
             a, b = self._bounds(last, start, goal)
             stats.rrt_calls += 1
-            found = _rrt(self.space, self.full, self._config(a), self._config(b), int(self.rng.integers(2**31)), self.p.reconnect_time)
+            found = _rrt(self.space, self.full, self._config(a), self._config(b), int(self.rng.integers(2**31)), self.p.reconnect_time,
+                         self.p.rrt_step)
             if found is not None:
                 ids = self.graph.add_nodes(found[1:-1])
                 chain = [a, *ids.tolist(), b]
@@ -177,7 +206,7 @@ def rrt_transit(space: JointSpace, full: Validity, q_start: np.ndarray, q_goal: 
     """The single-query baseline: RRTConnect between the ends, every pair checked."""
     t = time.perf_counter()
     stats.rrt_calls += 1
-    found = _rrt(space, full, q_start, q_goal, int(rng.integers(2**31)), params.rrt_time)
+    found = _rrt(space, full, q_start, q_goal, int(rng.integers(2**31)), params.rrt_time, params.rrt_step)
     stats.seconds_planning += time.perf_counter() - t
     if found is None:
         raise TransitFailed(f"RRTConnect found no path within {params.rrt_time:g} s")

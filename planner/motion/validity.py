@@ -4,9 +4,9 @@ One way to ask "is this configuration / this straight motion valid here": a `Val
 named pair subset of a situation's collision model (see situation.py) with the local planner's
 displacement bound (roadmap/local_planner.py), so a valid motion keeps every checked pair at least
 its clearance apart along the whole continuous segment. Two profiles state the paddings:
-`transit` keeps the offline roadmap's clearances (so roadmap edges and new edges guarantee the same), and
-`contact` is tighter, for the short motions that end touching the object (approach, closing,
-opening, retreat, lift, set-down).
+`transit` keeps the offline roadmap's clearances (so roadmap edges and new edges guarantee the same),
+its paddings lowered per motion to what the motion's ends allow (`fitted`); `contact` is tighter, for
+the short motions that end touching the object (approach, closing, opening, retreat, lift, set-down).
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+import pinocchio as pin
 
 from ..collision import CollisionModel
 from ..roadmap.local_planner import SegmentChecker, van_der_corput
@@ -104,6 +105,34 @@ class Validity:
     def path_valid(self, path: np.ndarray) -> bool:
         """Every state and every segment of a polyline."""
         return all(self.state_valid(q) for q in path) and all(self.motion_valid(a, b, ends=False) for a, b in zip(path[:-1], path[1:]))
+
+
+def clearances(cm: CollisionModel, q: np.ndarray, subset: str) -> dict[str, float]:
+    """The smallest distance at q of the subset's pairs with an obstacle ('env'), robot–object pairs ('object') and
+    robot–robot pairs ('self'); inf for a kind the subset lacks."""
+    gd = pin.GeometryData(cm.geometry)
+    active = np.zeros(len(cm.geometry.collisionPairs), dtype=bool)
+    active[cm.subsets[subset]] = True
+    for k in np.flatnonzero(~active):
+        gd.deactivateCollisionPair(int(k))
+    pin.computeDistances(cm.robot.model, cm.robot.model.createData(), cm.geometry, gd, q)
+    distance = np.array([r.min_distance for r in gd.distanceResults])
+    kind = np.full(len(distance), "self", dtype=object)
+    kind[cm.subsets["env"]] = "env"
+    kind[cm.subsets.get("object", [])] = "object"
+    return {k: float(distance[active & (kind == k)].min(initial=np.inf)) for k in ("env", "self", "object")}
+
+
+def fitted(profile: Profile, clearance: dict[str, float]) -> Profile:
+    """The profile with each padding lowered, when the given clearances are smaller, to 90 % of them (never to or
+    below the clearance it guarantees): checks stay as sparse as the motion's ends allow, the guarantee unchanged."""
+    def fit(padding: float, keep: float, have: float) -> float:
+        return padding if 0.9 * have >= padding or 0.9 * have <= keep else 0.9 * have
+
+    return dataclasses.replace(profile,
+                               env_padding=fit(profile.env_padding, profile.env_clearance, clearance["env"]),
+                               self_padding=fit(profile.self_padding, profile.self_clearance, clearance["self"]),
+                               object_padding=fit(profile.object_padding, profile.object_clearance, clearance["object"]))
 
 
 def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all") -> Validity:

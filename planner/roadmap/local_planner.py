@@ -89,16 +89,6 @@ def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, 
     return out
 
 
-def _maximal_rows(rows: np.ndarray) -> np.ndarray:
-    """The rows not dominated elementwise by another (the max of w . |dq| over rows only needs these)."""
-    rows = np.unique(rows, axis=0)
-    keep: list[np.ndarray] = []
-    for row in rows[np.argsort(-rows.sum(axis=1))]:
-        if not any(np.all(row <= k) for k in keep):
-            keep.append(row)
-    return np.array(keep).reshape(-1, rows.shape[1])
-
-
 class SegmentChecker:
     """Checks configurations and straight segments against named pair subsets (one per process)."""
 
@@ -119,7 +109,7 @@ class SegmentChecker:
     def weights(self, subset: str) -> np.ndarray:
         """(rows, nq) the subset's displacement weights per joint (computed once per subset)."""
         if subset not in self._weights:
-            self._weights[subset] = _maximal_rows(self._per_pair[self.cm.subsets[subset]])
+            self._weights[subset] = np.unique(self._per_pair[self.cm.subsets[subset]], axis=0)
         return self._weights[subset]
 
     def steps(self, qa: np.ndarray, qb: np.ndarray, subset: str) -> np.ndarray:
