@@ -31,7 +31,7 @@ PHASE_COLOR_NAMES = ("teal", "violet", "magenta", "grey")
 ROUTE_THICKNESS = 0.004  # m
 FPS = 30.0  # frames a second at most while playing (samples are skipped when the trajectory's rate or the speed is higher)
 SPEEDS = (0.1, 4.0)  # playback speed range (1 = real time)
-KEYFRAMES = ("start", "grasp", "exchange", "place", "end")  # names of `Motion.keyframes`
+KEYFRAMES = ("initial", "q_grasp", "q_exch", "q_place", "final")  # `Motion.keyframes` (not "exchange": the Double grasps folder has it)
 STAGE_SECONDS = ("planning", "validating", "shortcutting", "contact")  # the record's 4 seconds per phase, in order
 
 
