@@ -14,6 +14,7 @@ raises `PieceFailed` naming the phase and the part.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import coal
@@ -114,16 +115,41 @@ class PhasePlanner:
         self.stats[phase].seconds_contact += time.perf_counter() - t
         return np.array(out)
 
-    def retreat(self, q: np.ndarray, arm: str, keep: str | None, hover: bool, phase: int, part: str) -> np.ndarray:
-        """IK polyline from q (the palm at a grasp) backing off along the approach direction (half as far when the arm
-        cannot go the whole way), then rising by the lift height when `hover` (the object rests on a support there)."""
-        try:
-            path = self.straight(q, arm, self.backoff(q, arm), keep, phase, part)
-        except PieceFailed:
-            path = self.straight(q, arm, 0.5 * self.backoff(q, arm), keep, phase, part)
-        if hover:
-            path = np.concatenate([path, self.straight(path[-1], arm, np.array([0.0, 0.0, self.p.lift]), keep, phase, part)[1:]])
-        return path
+    def retreats(self, q: np.ndarray, arm: str, keep: str | None, hover: bool, phase: int, part: str) -> Iterator[np.ndarray]:
+        """Candidate IK polylines from q (the palm at a grasp) backing off along the approach direction (the pre-grasp
+        distance, farther, nearer), then rising by the lift height when `hover` (the object rests on a support there;
+        elsewhere rising is the last resort). Candidates the arm cannot follow are skipped."""
+        d, up = self.p.pregrasp_distance, np.array([0.0, 0.0, self.p.lift])
+        rises = (1.0, 1.0, 2.0, 1.0) if hover else (0.0, 0.0, 0.0, 1.0)
+        for scale, rise in zip((1.0, 1.7, 1.0, 0.5) if hover else (1.0, 1.7, 0.5, 1.0), rises):
+            try:
+                path = self.straight(q, arm, scale * d / self.p.pregrasp_distance * self.backoff(q, arm), keep, phase, part)
+                if rise:
+                    path = np.concatenate([path, self.straight(path[-1], arm, rise * up, keep, phase, part)[1:]])
+            except PieceFailed:
+                continue
+            yield path
+
+    def first(self, phase: int, part: str, candidates: Iterator[np.ndarray], build) -> list[Piece]:
+        """The pieces `build` makes of the first candidate for which it raises no PieceFailed."""
+        failure = None
+        for candidate in candidates:
+            try:
+                return build(candidate)
+            except PieceFailed as exc:
+                failure = exc
+        raise failure or PieceFailed(phase, part, "the arm cannot back its hand off in a straight line")
+
+    def ready(self, q: np.ndarray, situation: Situation, phase: int, part: str) -> None:
+        """PieceFailed unless q keeps the transit clearances in the situation (so a transit can start or end there)."""
+        model = self.model(situation, q, self.transit_idx)
+        have = clearances(model, q, "moving")
+        t = self.transit_profile
+        if not (have["env"] > t.env_clearance and have["self"] > t.self_clearance and have["object"] > t.object_clearance):
+            raise PieceFailed(phase, part, f"ends too near something to start a transit ({_pairs(self._near(model, q))})")
+
+    def _near(self, model: CollisionModel, q: np.ndarray) -> list[tuple[str, str]]:
+        return make_validity(model, self.transit_profile, "moving").first_collision(q[None])
 
     def backoff(self, q: np.ndarray, arm: str) -> np.ndarray:
         """World offset that backs the arm's palm off along its approach direction by the pre-grasp distance."""
@@ -220,28 +246,44 @@ class PhasePlanner:
 
         # Grasp
         pre_a, let_a = self.opened(a, p.preshape), self.opened(a, p.release, True)
-        approach = self.retreat(self.with_fingers(q_grasp, a.arm, pre_a), a.arm, None, True, 0, "pre-grasp")[::-1]
-        q_pre = self.with_fingers(approach[0], a.arm, open_a)
-        pieces.append(self.transit(0, scene.q_initial, q_pre, static_i))
-        pieces += self.fingers(0, "pre-shape", q_pre, a.arm, pre_a, static_i)
-        pieces.append(self.contact(0, "approach", approach, static_i, a.arm))
-        pieces += self.fingers(0, "closing", approach[-1], a.arm, a.fingers, Situation(None, oi, tips_a))
+
+        def grasp(retreat: np.ndarray) -> list[Piece]:
+            approach = retreat[::-1]
+            q_pre = self.with_fingers(approach[0], a.arm, open_a)
+            out = [self.contact(0, "approach", approach, static_i, a.arm)]
+            out = [self.transit(0, scene.q_initial, q_pre, static_i)] + self.fingers(0, "pre-shape", q_pre, a.arm, pre_a, static_i) + out
+            return out + self.fingers(0, "closing", approach[-1], a.arm, a.fingers, Situation(None, oi, tips_a))
+
+        pieces += self.first(0, "pre-grasp", self.retreats(self.with_fingers(q_grasp, a.arm, pre_a), a.arm, None, True, 0, "pre-grasp"),
+                             grasp)
 
         # Carry
         lift = self.straight(pieces[-1].path[-1], a.arm, up, None, 1, "lift")
         pieces.append(self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i), a.arm))
         pre_b, let_b = self.opened(b, p.preshape), self.opened(b, p.release, True)
         q_x = self.with_fingers(q_exch, a.arm, a.fingers)
-        approach_b = self.retreat(self.with_fingers(q_x, b.arm, pre_b), b.arm, a.arm, False, 1, "exchange pre-grasp")[::-1]
-        q_pre_b = self.with_fingers(approach_b[0], b.arm, open_b)
-        pieces.append(self.transit(1, lift[-1], q_pre_b, held_a))
-        pieces += self.fingers(1, "pre-shape", q_pre_b, b.arm, pre_b, held_a)
-        pieces.append(self.contact(1, "approach", approach_b, held_a, b.arm))
-        pieces += self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
+
+        def exchange(retreat: np.ndarray) -> list[Piece]:
+            approach_b = retreat[::-1]
+            q_pre_b = self.with_fingers(approach_b[0], b.arm, open_b)
+            out = [self.contact(1, "approach", approach_b, held_a, b.arm)]
+            out = [self.transit(1, lift[-1], q_pre_b, held_a)] + self.fingers(1, "pre-shape", q_pre_b, b.arm, pre_b, held_a) + out
+            return out + self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
+
+        pieces += self.first(1, "exchange pre-grasp", self.retreats(self.with_fingers(q_x, b.arm, pre_b), b.arm, a.arm, False, 1,
+                                                                     "exchange pre-grasp"), exchange)
         released = Situation(b.arm, g_b, tips_a)
         pieces += self.fingers(1, "opening", pieces[-1].path[-1], a.arm, let_a, released)
-        retreat_a = self.retreat(pieces[-1].path[-1], a.arm, b.arm, False, 1, "retreat")
-        pieces.append(self.contact(1, "retreat", retreat_a, released, a.arm))
+
+        def leave(situation: Situation, after: Situation, phase: int, arm: str):
+            def build(retreat: np.ndarray) -> list[Piece]:
+                piece = self.contact(phase, "retreat", retreat, situation, arm)
+                self.ready(retreat[-1], after, phase, "retreat")
+                return [piece]
+            return build
+
+        pieces += self.first(1, "retreat", self.retreats(pieces[-1].path[-1], a.arm, b.arm, False, 1, "retreat"),
+                             leave(released, held_b, 1, a.arm))
 
         # Place (the picking hand keeps its fingers as they let go until the end: opened near the object, they hit it)
         q_down = self.with_fingers(q_place, a.arm, let_a)
@@ -250,8 +292,8 @@ class PhasePlanner:
         pieces.append(self.contact(2, "set-down", lower, Situation(b.arm, g_b, (), support_f), b.arm))
         let_go = Situation(None, of, tips_b)
         pieces += self.fingers(2, "opening", lower[-1], b.arm, let_b, let_go)
-        retreat_b = self.retreat(pieces[-1].path[-1], b.arm, None, True, 2, "retreat")
-        pieces.append(self.contact(2, "retreat", retreat_b, let_go, b.arm))
+        pieces += self.first(2, "retreat", self.retreats(pieces[-1].path[-1], b.arm, None, True, 2, "retreat"),
+                             leave(let_go, static_f, 2, b.arm))
 
         # Rest: to the final configuration, then both hands open
         q_end = self.with_fingers(self.with_fingers(scene.q_final, a.arm, let_a), b.arm, let_b)
