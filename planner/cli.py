@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import signal
 import sys
 from pathlib import Path
@@ -285,12 +286,24 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+class _LineAboveBars(logging.Handler):
+    """Prints regrasp's log lines (e.g. a cache entry recomputed) on their own line above the progress bars."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        from tqdm import tqdm
+
+        tqdm.write(self.format(record), file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one sub-command; every fault a user can meet ends in one line on stderr and an exit code, never a traceback."""
     from .forked import Terminated, exit_cleanly_on_sigterm
 
     args = parser().parse_args(argv)
     exit_cleanly_on_sigterm()
+    log = logging.getLogger("regrasp")
+    if not any(isinstance(h, _LineAboveBars) for h in log.handlers):
+        log.addHandler(_LineAboveBars(logging.INFO))  # found first: Python's last-resort stderr handler stays unused
     try:
         return args.func(args)
     except RegraspError as exc:
