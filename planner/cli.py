@@ -297,15 +297,15 @@ class _LineAboveBars(logging.Handler):
 
 def main(argv: list[str] | None = None) -> int:
     """Run one sub-command; every fault a user can meet ends in one line on stderr and an exit code, never a traceback."""
-    from .forked import Terminated, exit_cleanly_on_sigterm
+    from .forked import Terminated, sigterm_unwinds
 
     args = parser().parse_args(argv)
-    exit_cleanly_on_sigterm()
     log = logging.getLogger("regrasp")
     if not any(isinstance(h, _LineAboveBars) for h in log.handlers):
         log.addHandler(_LineAboveBars(logging.INFO))  # found first: Python's last-resort stderr handler stays unused
     try:
-        return args.func(args)
+        with sigterm_unwinds():
+            return args.func(args)
     except RegraspError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -13,7 +13,7 @@ import numpy as np
 import viser
 
 from planner.collision import CollisionChecker, build_collision_model
-from planner.forked import exit_cleanly_on_sigterm, stop_all_pools
+from planner.forked import sigterm_unwinds, stop_all_pools
 from planner.paths import ASSETS, DEFAULT_TASK
 from planner.session import Session
 from planner.task import Scene, load_task
@@ -271,10 +271,10 @@ class Workbench:
 
 def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080, session: str | Path | None = None) -> None:
     """Start the workbench (on a task, or replaying a saved session) and serve until interrupted (Ctrl-C)."""
-    exit_cleanly_on_sigterm()  # SIGTERM ends the server like Ctrl-C: the workers of a running step are killed too
     workbench = Workbench(task, host, port, session=session)
     try:
-        workbench.server.sleep_forever()
+        with sigterm_unwinds():  # SIGTERM ends the server like Ctrl-C: the workers of a running step are killed too
+            workbench.server.sleep_forever()
     except KeyboardInterrupt:
         pass
     finally:
