@@ -184,6 +184,19 @@ def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
             _seconds(t, path, f"{field}.stage_seconds[{k}]")
 
 
+def _only_embedded_meshes(task: dict[str, Any], meshes: dict[str, trimesh.Trimesh], path: Path) -> None:
+    """Every mesh the task names must be embedded: a session never makes regrasp read a mesh file from the disk."""
+    obj = task.get("object")
+    named = [("task.object.mesh", obj.get("mesh"))] if isinstance(obj, dict) else []
+    obstacles = task.get("obstacles")
+    for i, ob in enumerate(obstacles if isinstance(obstacles, list) else []):
+        if isinstance(ob, dict) and "mesh" in ob:
+            named.append((f"task.obstacles[{i}].mesh", ob["mesh"]))
+    for field, name in named:
+        if isinstance(name, str) and name not in meshes:
+            _fail(path, field, f"the mesh {_short(name)} is not embedded in the session's {MESHES}; a session reads no mesh file")
+
+
 def check_manifest(manifest: dict[str, Any], path: Path) -> None:
     """Validate a whole manifest (types, names, order, finiteness) before anything touches the disk or the cache."""
     for key in MANIFEST_KEYS:
@@ -294,6 +307,7 @@ class Session:
         except RegraspError as exc:
             raise InputError(path, "robot_spec", f"the embedded robot spec is not valid: {exc}") from exc
         meshes = _load_meshes(folder)
+        _only_embedded_meshes(manifest["task"], meshes, path)
         try:
             scene = scene_from_dict(manifest["task"], path, robot_path=spec, meshes=meshes, field_prefix="task")
         except InputError:
