@@ -38,7 +38,11 @@ def _roadmap(scene: Scene) -> Any:
 
 
 def _pairs(scene: Scene) -> Any:
-    from planner.collision import CollisionParams, robot_pair_set, simplified_robot_geometry
+    from planner.collision import (
+        CollisionParams,
+        robot_pair_set,
+        simplified_robot_geometry,
+    )
 
     return robot_pair_set(scene.robot, simplified_robot_geometry(scene.robot), CollisionParams(prune_samples=20))
 

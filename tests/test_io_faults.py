@@ -64,7 +64,7 @@ print(json.dumps(out))
 
 def _usable(command: list[str]) -> bool:
     try:
-        return subprocess.run(command, capture_output=True, timeout=60).returncode == 0
+        return subprocess.run(command, capture_output=True, timeout=60, check=False).returncode == 0
     except (OSError, subprocess.TimeoutExpired):
         return False
 
@@ -80,7 +80,8 @@ def _in_tmpfs(tmp_path: Path, size: str, *args: str) -> dict:
     mnt.mkdir()
     script = f'mount -t tmpfs -o size={size} tmpfs "$1" && shift && exec "$@"'
     run = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", script, "sh", str(mnt),
-                          sys.executable, str(driver), str(mnt), *args], capture_output=True, text=True, timeout=900, env=cli_env())
+                          sys.executable, str(driver), str(mnt), *args], capture_output=True, text=True, timeout=900, env=cli_env(),
+                         check=False)
     assert run.returncode == 0, run.stderr
     return json.loads(run.stdout.splitlines()[-1])
 

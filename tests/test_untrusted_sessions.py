@@ -11,7 +11,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-from sandbox import copy_example, escaping, one_error_line, read_manifest, regrasp, snapshot, write_manifest
+from sandbox import (
+    copy_example,
+    escaping,
+    one_error_line,
+    read_manifest,
+    regrasp,
+    snapshot,
+    write_manifest,
+)
 
 from planner.errors import InputError
 from planner.session import MANIFEST, MESHES, Session

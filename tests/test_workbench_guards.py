@@ -9,9 +9,9 @@ import pytest
 from sandbox import snapshot
 from test_workbench_browser import _free_port
 
-import workbench.session_panel as session_panel
 from planner.errors import RegraspError
 from planner.paths import ASSETS, DEFAULT_TASK
+from workbench import session_panel
 from workbench.app import Workbench
 from workbench.session_store import MAX_SESSION_NAME, check_name
 
