@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 from sandbox import cli_env
-from test_workbench_browser import _free_port
+from test_workbench_browser import _free_port, _wait_for
 
 WORKERS_START_WITHIN = 900.0  # s: a cold cache builds the pair set, the finger workspaces and the object model first
 WORKERS_GONE_WITHIN = 30.0  # s: a timeout, not a measurement; the kernel kills them at once
@@ -25,7 +25,7 @@ from workbench import app
 class Running(app.Workbench):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.session_panel.run_until("pick_grasps")
+        self.session_panel.run_wait_for("pick_grasps")
 
 
 app.Workbench = Running
@@ -53,15 +53,6 @@ def _running(pid: int) -> bool:
     return state not in ("Z", "X")
 
 
-def _until(condition: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.2)
-    return condition()
-
-
 @pytest.fixture(scope="module")
 def cold_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A cache of this module's own: no grasp list is ever in it (every run here is killed), so the search always runs."""
@@ -78,7 +69,7 @@ def started(cold_cache: Path, tmp_path: Path) -> Iterator[Callable[[list[str]], 
         proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
                                 env=cli_env(REGRASP_CACHE=str(cold_cache)))
         procs.append(proc)
-        assert _until(lambda: len(_children(proc.pid)) >= 2 or proc.poll() is not None, WORKERS_START_WITHIN)
+        assert _wait_for(lambda: len(_children(proc.pid)) >= 2 or proc.poll() is not None, WORKERS_START_WITHIN)
         workers = _children(proc.pid)
         seen.update(workers)
         assert proc.poll() is None and len(workers) >= 2, proc.stderr.read() if proc.stderr else ""
@@ -107,7 +98,7 @@ def test_sigkill_leaves_no_worker(started, tmp_path: Path, command: str) -> None
     proc, workers = started(_plan(tmp_path / "s") if command == "plan" else _workbench())
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    assert _until(lambda: not any(_running(w) for w in workers), WORKERS_GONE_WITHIN), \
+    assert _wait_for(lambda: not any(_running(w) for w in workers), WORKERS_GONE_WITHIN), \
         f"workers {sorted(w for w in workers if _running(w))} outlived their killed parent"
 
 
@@ -139,7 +130,7 @@ def test_worker_pool_kills_its_workers_when_the_caller_raises() -> None:
     with pytest.raises(KeyboardInterrupt), worker_pool(2) as pool:
         for _ in range(2):
             pool.submit(time.sleep, 600)
-        assert _until(lambda: len(_children(os.getpid()) - before) >= 2, 60)
+        assert _wait_for(lambda: len(_children(os.getpid()) - before) >= 2, 60)
         workers = _children(os.getpid()) - before
         raise KeyboardInterrupt
     assert not any(_running(w) for w in workers)
