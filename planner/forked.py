@@ -6,7 +6,7 @@ only the results travel back, pickled. Falls back to running inline where fork i
 Workers never outlive their parent: each asks the kernel for SIGKILL when the thread that forked
 it dies (Linux `PR_SET_PDEATHSIG`, so even `kill -9` of the parent ends them), a pool left by an
 exception (Ctrl-C, SIGTERM turned into `Terminated`) is killed rather than waited for, and
-`stop_all_pools()` kills every live pool (the workbench calls it when it shuts down).
+`stop_pools(thread)` kills the live pools a thread made (the workbench's background run, when it shuts down).
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from typing import Any
 PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
-_LIVE: set[concurrent.futures.ProcessPoolExecutor] = set()
+_LIVE: dict[concurrent.futures.ProcessPoolExecutor, threading.Thread] = {}  # live pools, by the thread that made them
 _LIVE_LOCK = threading.Lock()
 
 
@@ -81,10 +81,10 @@ def _kill(pool: concurrent.futures.ProcessPoolExecutor) -> None:
             p.join()
 
 
-def stop_all_pools() -> None:
-    """Kill the workers of every pool still running in this process (on shutdown)."""
+def stop_pools(thread: threading.Thread) -> None:
+    """Kill the workers of the pools `thread` made that are still running (on shutdown, from another thread)."""
     with _LIVE_LOCK:
-        pools = list(_LIVE)
+        pools = [pool for pool, owner in _LIVE.items() if owner is thread]
     for pool in pools:
         _kill(pool)
 
@@ -96,7 +96,7 @@ def worker_pool(workers: int, initializer: Callable[..., None] | None = None, in
     pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_child_init,
                                                   initargs=(os.getpid(), initializer, initargs))
     with _LIVE_LOCK:
-        _LIVE.add(pool)
+        _LIVE[pool] = threading.current_thread()
     try:
         yield pool
     except BaseException:
@@ -106,7 +106,7 @@ def worker_pool(workers: int, initializer: Callable[..., None] | None = None, in
         pool.shutdown(wait=True)
     finally:
         with _LIVE_LOCK:
-            _LIVE.discard(pool)
+            _LIVE.pop(pool, None)
 
 
 def _run(i: int) -> Any:

@@ -25,7 +25,7 @@ from workbench import app
 class Running(app.Workbench):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.session_panel.run_wait_for("pick_grasps")
+        self.session_panel.run_until("pick_grasps")
 
 
 app.Workbench = Running

@@ -13,7 +13,7 @@ import numpy as np
 import viser
 
 from planner.collision import CollisionChecker, build_collision_model
-from planner.forked import sigterm_unwinds, stop_all_pools
+from planner.forked import sigterm_unwinds, stop_pools
 from planner.paths import ASSETS, DEFAULT_TASK
 from planner.session import Session
 from planner.task import Scene, load_task
@@ -76,7 +76,8 @@ class Workbench:
         """Stop the server and the workers of a run still going; a collision model still being built is dropped."""
         with self._lock:
             self._generation += 1
-        stop_all_pools()
+        if self.session_panel.job is not None:
+            stop_pools(self.session_panel.job)
         self.server.stop()
 
     def _build_gui(self, sessions_dir: Path) -> None:
