@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from .errors import InputError, RegraspError
+from .results import writing
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 ASSETS = PROJECT_ROOT / "assets"
@@ -41,7 +42,8 @@ def cache_dir() -> Path:
         base = Path(env)
     else:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "regrasp"
-    base.mkdir(parents=True, exist_ok=True)
+    with writing(base):
+        base.mkdir(parents=True, exist_ok=True)
     return base
 
 

@@ -81,7 +81,11 @@ def _copy_files(session: Session, target: Path) -> None:
                 old = target.with_name(f".{target.name}.old")
                 shutil.rmtree(old, ignore_errors=True)
                 target.rename(old)
-                staging.rename(target)
+                try:
+                    staging.rename(target)
+                except OSError:
+                    old.rename(target)  # the session saved before stays where it was
+                    raise
                 shutil.rmtree(old)
             else:
                 staging.rename(target)
