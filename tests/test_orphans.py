@@ -111,6 +111,7 @@ def test_sigterm_of_plan_stops_its_workers_with_a_message(started, tmp_path: Pat
     assert "Traceback" not in stderr and "error: terminated (SIGTERM)" in stderr, stderr
     assert not any(_running(w) for w in workers)
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [], "a temporary file was left in the session"
+    assert [p.name for p in tmp_path.iterdir()] == ["s"], "the run wrote beside its session folder"
 
 
 def test_sigterm_of_the_workbench_stops_a_running_steps_workers(started) -> None:
