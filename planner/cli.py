@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
+import signal
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -229,9 +231,9 @@ def _grasp_inputs(args: argparse.Namespace) -> tuple[RobotSpec, trimesh.Trimesh,
 
 
 def _write_json(path: Path, data: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2))
-    tmp.replace(path)
+    from .results import atomic_write_text
+
+    atomic_write_text(path, json.dumps(data, indent=2))
 
 
 def parser() -> argparse.ArgumentParser:
@@ -304,14 +306,38 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+class _LineAboveBars(logging.Handler):
+    """Prints regrasp's log lines (e.g. a cache entry recomputed) on their own line above the progress bars."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        from tqdm import tqdm
+
+        tqdm.write(self.format(record), file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one sub-command; every fault a user can meet ends in one line on stderr and an exit code, never a traceback."""
+    from .forked import Terminated, sigterm_unwinds
+
     args = parser().parse_args(argv)
+    log = logging.getLogger("regrasp")
+    if not any(isinstance(h, _LineAboveBars) for h in log.handlers):
+        log.addHandler(_LineAboveBars(logging.INFO))  # found first: Python's last-resort stderr handler stays unused
     try:
-        return args.func(args)
+        with sigterm_unwinds():
+            return args.func(args)
     except RegraspError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # an I/O fault no step turned into a RegraspError: still one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except Terminated:
+        print("error: terminated (SIGTERM)", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
         return 130
 
 

@@ -24,8 +24,9 @@ import trimesh
 
 from .environment import Environment
 from .geometry import coal_convex, se3
-from .paths import cache_dir
+from .results import atomic_write_text
 from .robot import Robot
+from .user_cache import cache_path, read_cached
 
 CODE_VERSION = "pairs-2"
 
@@ -57,7 +58,11 @@ class PairSet:
     @staticmethod
     def from_json(text: str) -> "PairSet":
         d = json.loads(text)
-        return PairSet(tuple(tuple(p) for p in d["kept"]), d["adjacent"], d["at_rest"], d["pruned"])
+        kept = tuple(tuple(p) for p in d["kept"])
+        counts = (d["adjacent"], d["at_rest"], d["pruned"])
+        if not all(len(p) == 2 and all(isinstance(n, str) for n in p) for p in kept) or not all(type(c) is int for c in counts):
+            raise ValueError("expected 'kept' as pairs of geometry names and integer counts")
+        return PairSet(kept, *counts)
 
 
 def simplified_robot_geometry(robot: Robot) -> pin.GeometryModel:
@@ -150,14 +155,13 @@ def compute_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParam
 
 def robot_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParams, use_cache: bool = True) -> PairSet:
     """The pair set, from the user cache when the spec, URDFs and parameters are unchanged."""
-    path = cache_dir() / "collision_pairs" / f"{_pair_cache_key(robot, params)}.json"
-    if use_cache and path.is_file():
-        return PairSet.from_json(path.read_text())
+    path = cache_path("collision_pairs", f"{_pair_cache_key(robot, params)}.json")
+    if use_cache:
+        cached = read_cached([path], lambda: PairSet.from_json(path.read_text()), "self-collision pair set")
+        if cached is not None:
+            return cached
     pairs = compute_pair_set(robot, gm, params)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(pairs.to_json())
-    tmp.replace(path)
+    atomic_write_text(path, pairs.to_json())
     return pairs
 
 

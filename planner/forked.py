@@ -2,16 +2,111 @@
 
 Fork, not spawn: workers start at once and share the parent's read-only models (pinocchio, coal);
 only the results travel back, pickled. Falls back to running inline where fork is unavailable.
+
+Workers never outlive their parent: each asks the kernel for SIGKILL when the thread that forked
+it dies (Linux `PR_SET_PDEATHSIG`, so even `kill -9` of the parent ends them), a pool left by an
+exception (Ctrl-C, SIGTERM turned into `Terminated`) is killed rather than waited for, and
+`stop_pools(thread)` kills the live pools a thread made (the workbench's background run, when it shuts down).
 """
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
+import ctypes
 import multiprocessing
 import os
-from collections.abc import Callable, Sequence
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from types import FrameType
 from typing import Any
 
+PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
+
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
+_LIVE: dict[concurrent.futures.ProcessPoolExecutor, threading.Thread] = {}  # live pools, by the thread that made them
+_LIVE_LOCK = threading.Lock()
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread so that `finally` blocks run (pools killed, temporary files removed)."""
+
+
+def _raise_terminated(signum: int, frame: FrameType | None) -> None:
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def sigterm_unwinds() -> Iterator[None]:
+    """Inside: SIGTERM unwinds the main thread like Ctrl-C (as `Terminated`) instead of ending the process on the spot."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _die_with_parent(parent: int) -> None:
+    """In a forked worker: be killed when the parent goes (Linux), and go at once if it is already gone."""
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) != 0:
+            raise OSError(ctypes.get_errno(), "prctl(PR_SET_PDEATHSIG) failed")
+    if os.getppid() != parent:  # the parent died before the line above took effect
+        os._exit(1)
+
+
+def _child_init(parent: int, initializer: Callable[..., None] | None, initargs: tuple) -> None:
+    # the parent's SIGTERM handler raises in the parent's code: a worker just ends on SIGTERM
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the whole group; the parent kills the pool
+    _die_with_parent(parent)
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def _kill(pool: concurrent.futures.ProcessPoolExecutor) -> None:
+    """Kill a pool's workers (not wait for their jobs) and release it."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # CPython's map of the pool's workers
+    for p in processes:
+        with contextlib.suppress(OSError, ValueError):
+            p.kill()
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        with contextlib.suppress(OSError, ValueError, AssertionError):
+            p.join()
+
+
+def stop_pools(thread: threading.Thread) -> None:
+    """Kill the workers of the pools `thread` made that are still running (on shutdown, from another thread)."""
+    with _LIVE_LOCK:
+        pools = [pool for pool, owner in _LIVE.items() if owner is thread]
+    for pool in pools:
+        _kill(pool)
+
+
+@contextlib.contextmanager
+def worker_pool(workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()
+                ) -> Iterator[concurrent.futures.ProcessPoolExecutor]:
+    """A pool of `workers` forked processes that die with their parent; on an exception its workers are killed, not awaited."""
+    pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_child_init,
+                                                  initargs=(os.getpid(), initializer, initargs))
+    with _LIVE_LOCK:
+        _LIVE[pool] = threading.current_thread()
+    try:
+        yield pool
+    except BaseException:
+        _kill(pool)
+        raise
+    else:
+        pool.shutdown(wait=True)
+    finally:
+        with _LIVE_LOCK:
+            _LIVE.pop(pool, None)
 
 
 def _run(i: int) -> Any:
@@ -26,20 +121,20 @@ def forked_map(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int | Non
     `on_result` sees each result as it arrives, in order (for progress reports)."""
     global _JOBS
     workers = min(len(jobs), workers or os.cpu_count() or 1)
-    out: list[Any] = []
     if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-        results = map(fn, jobs)
-    else:
-        _JOBS = (fn, jobs)
-        pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
-        results = pool.map(_run, range(len(jobs)))
+        return _collect(map(fn, jobs), on_result)
+    _JOBS = (fn, jobs)
     try:
-        for result in results:
-            out.append(result)
-            if on_result is not None:
-                on_result(result)
+        with worker_pool(workers) as pool:
+            return _collect(pool.map(_run, range(len(jobs))), on_result)
     finally:
-        if workers > 1 and _JOBS is not None:
-            pool.shutdown()
-            _JOBS = None
+        _JOBS = None
+
+
+def _collect(results: Iterator[Any], on_result: Callable[[Any], None] | None) -> list[Any]:
+    out: list[Any] = []
+    for result in results:
+        out.append(result)
+        if on_result is not None:
+            on_result(result)
     return out

@@ -26,10 +26,10 @@ from .grasp_frames import box_grid, hopf_rotations
 from .grasp_search import OUTCOMES, FrameGrasp, GraspSearch, SearchParams
 from .hand_model import HandModel, load_hand_model
 from .object_model import ObjectModel, mesh_bytes, object_model
-from .results import array, load_result, save_result
+from .results import array, load_result, save_result, writing
 from .robot_spec import HandSpec, RobotSpec
 from .steps import Progress, Step, StepContext, no_progress
-from .user_cache import cache_key, cache_path
+from .user_cache import cache_key, cache_path, read_cached
 
 CODE_VERSION = "grasps-1"
 CHUNKS_PER_WORKER = 6
@@ -226,13 +226,14 @@ def grasp_list(spec: RobotSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams,
     hand = hand_spec_of(spec, arm)
     key = cache_key(CODE_VERSION, repr(hand), hand.urdf.read_bytes(), mesh_bytes(mesh), repr(p), str(seed), arm)
     folder = cache_path("grasps", key)
-    if use_cache and (folder / "grasps.json").is_file():
-        try:
-            return load_result(GraspList, folder, "grasps"), True
-        except RegraspError:
-            pass  # a damaged cache entry is recomputed and overwritten
+    if use_cache:
+        cached = read_cached([folder / "grasps.json", folder / "grasps.npz"], lambda: load_result(GraspList, folder, "grasps"),
+                             f"grasp list of the {arm} hand")
+        if cached is not None:
+            return cached, True
     result = compute_grasp_list(hand, arm, mesh, p, seed, progress, workers)
-    folder.mkdir(parents=True, exist_ok=True)
+    with writing(folder):
+        folder.mkdir(parents=True, exist_ok=True)
     save_result(result, folder, "grasps")
     return result, False
 

@@ -6,7 +6,8 @@ import importlib.metadata
 import os
 from pathlib import Path
 
-from .errors import RegraspError
+from .errors import InputError, RegraspError
+from .results import writing
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 ASSETS = PROJECT_ROOT / "assets"
@@ -41,5 +42,28 @@ def cache_dir() -> Path:
         base = Path(env)
     else:
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "regrasp"
-    base.mkdir(parents=True, exist_ok=True)
+    with writing(base):
+        base.mkdir(parents=True, exist_ok=True)
     return base
+
+
+MAX_NAME_BYTES = 200  # below NAME_MAX (255) so that `.<name>.saving`-style staging names still fit
+
+
+def plain_name(value: object, source: str | Path, field: str) -> str:
+    """A file name read from a file, checked to be one plain name (the only way such names become paths)."""
+    if not isinstance(value, str):
+        raise InputError(source, field, f"expected a file name (a string), got {type(value).__name__}")
+    if value in ("", ".", ".."):
+        raise InputError(source, field, f"expected a file name, got {value!r}")
+    bad = sorted({c for c in value if c in "/\\\0" or not c.isprintable()})
+    if bad:
+        raise InputError(source, field, f"expected a plain file name (no folder separators or control characters), got {value!r}")
+    if len(value.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
+        raise InputError(source, field, f"expected a file name of at most {MAX_NAME_BYTES} bytes, got {len(value.encode('utf-8', 'surrogatepass'))}")
+    return value
+
+
+def file_in(folder: Path, value: object, source: str | Path, field: str) -> Path:
+    """`folder / value` for a name read from `source` (field `field`), refused unless it is a plain file name."""
+    return folder / plain_name(value, source, field)

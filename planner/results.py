@@ -7,17 +7,21 @@ array's dtype and shape and every JSON field's presence, with errors naming the 
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import errno
 import io
 import json
 import os
 import zipfile
+import zlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, RegraspError
 
 R = TypeVar("R")
 
@@ -31,14 +35,41 @@ def _is_array(f: dataclasses.Field) -> bool:
     return "dtype" in f.metadata
 
 
+class OutputError(RegraspError):
+    """A folder regrasp could not write into (no permission, read-only file system, disk full...): names it and the cause."""
+
+    def __init__(self, folder: Path, exc: OSError):
+        self.folder = Path(folder)
+        self.errno = exc.errno
+        cause = os.strerror(exc.errno) if exc.errno else str(exc)
+        code = f" [{errno.errorcode[exc.errno]}]" if exc.errno in errno.errorcode else ""
+        other = exc.filename is not None and not Path(os.fsdecode(exc.filename)).is_relative_to(self.folder)
+        super().__init__(f"could not write to {self.folder}: {cause}{code}" + (f" ({exc.filename})" if other else ""))
+
+
+@contextlib.contextmanager
+def writing(folder: Path) -> Iterator[None]:
+    """Turn an OSError raised while writing into `folder` into one OutputError naming the folder and the cause."""
+    try:
+        yield
+    except OSError as exc:
+        raise OutputError(folder, exc) from exc
+
+
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write to a temporary file in the same folder, then rename: a crash never leaves half a file."""
+    """Write to a temporary file in the same folder, then rename: a crash never leaves half a file, a failure no temporary one."""
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    with writing(path.parent):
+        try:
+            with open(tmp, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
+            raise
 
 
 def atomic_write_text(path: Path, text: str) -> None:
@@ -71,12 +102,25 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-able: declare it with results.array(...)")
 
 
+def regular_file(path: Path, missing: str) -> Path:
+    """`path` if it is a regular file (not a link, a folder or a device); else an InputError (`missing` says why it should be there)."""
+    if path.is_symlink():
+        raise InputError(path, None, "a symbolic link: a session's files must be plain files inside its folder")
+    if not path.exists():
+        raise InputError(path, None, f"missing: {missing}")
+    if not path.is_file():
+        raise InputError(path, None, "not a regular file")
+    return path
+
+
 def read_json_object(path: Path) -> dict[str, Any]:
     """A JSON file that must hold an object; anything else is an InputError naming the file."""
     try:
         data = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(path, None, f"not valid JSON ({exc})") from exc
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        raise InputError(path, None, f"not valid JSON ({type(exc).__name__}: {exc})") from exc
+    except OSError as exc:
+        raise InputError(path, None, f"cannot be read ({os.strerror(exc.errno) if exc.errno else exc})") from exc
     if not isinstance(data, dict):
         raise InputError(path, None, "expected a JSON object")
     return data
@@ -88,14 +132,9 @@ def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | No
     `dims` fixes named dimensions known from the scene (e.g. nq, the robot's DoF)."""
     npz_path, json_path = folder / f"{stem}.npz", folder / f"{stem}.json"
     for p in (npz_path, json_path):
-        if not p.is_file():
-            raise InputError(p, None, "missing: the session lists this step as finished but its file is gone")
+        regular_file(p, "the session lists this step as finished but its file is gone")
     rest = read_json_object(json_path)
-    try:
-        with np.load(npz_path, allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
-        raise InputError(npz_path, None, f"not a readable .npz file (truncated or corrupt: {exc})") from exc
+    arrays = read_npz(npz_path)
     values: dict[str, Any] = {}
     dims = dict(dims or {})
     for f in dataclasses.fields(cls):
@@ -113,6 +152,15 @@ def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | No
     return cls(**values)
 
 
+def read_npz(path: Path) -> dict[str, np.ndarray]:
+    """Every array of an .npz file (no pickles); a truncated or corrupt file is an InputError naming it."""
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            return {k: npz[k] for k in npz.files}
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError, NotImplementedError) as exc:
+        raise InputError(path, None, f"not a readable .npz file (truncated or corrupt: {type(exc).__name__}: {exc})") from exc
+
+
 def _checked(value: np.ndarray, f: dataclasses.Field, path: Path, dims: dict[str, int]) -> np.ndarray:
     want_dtype, want_shape = np.dtype(f.metadata["dtype"]), f.metadata["shape"]
     if value.dtype != want_dtype:
@@ -125,6 +173,8 @@ def _checked(value: np.ndarray, f: dataclasses.Field, path: Path, dims: dict[str
         if isinstance(want, str):
             if dims.setdefault(want, got) != got:
                 raise InputError(path, f.name, f"expected shape {_shape_text(want_shape)} with {want} = {dims[want]}, got {value.shape}")
+    if value.dtype.kind in "fc" and not np.isfinite(value).all():
+        raise InputError(path, f.name, f"expected finite numbers, found {np.count_nonzero(~np.isfinite(value))} NaN or infinite")
     value.setflags(write=False)
     return value
 

@@ -10,21 +10,33 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import json
+import math
 import platform
 import shutil
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import trimesh
 
 from . import __version__
 from .errors import InputError, RegraspError
-from .paths import cache_dir
+from .paths import cache_dir, file_in, plain_name
 from .pipeline import PIPELINE, step_named
-from .results import atomic_write_text, load_result, read_json_object, save_result
+from .results import (
+    atomic_write_bytes,
+    atomic_write_text,
+    load_result,
+    read_json_object,
+    read_npz,
+    regular_file,
+    save_result,
+    writing,
+)
+from .robot import load_robot
 from .steps import Step
 from .task import Scene, scene_from_dict
 
@@ -32,6 +44,9 @@ FORMAT_VERSION = 1
 MANIFEST = "session.json"
 MESHES = "task_meshes.npz"
 STEP_KEYS = ("name", "params", "seed", "seconds", "stats", "files")
+OPTIONAL_STEP_KEYS = ("stage_seconds",)
+MANIFEST_KEYS = ("format_version", "task", "robot_spec", "robot_spec_name", "seed", "versions", "steps")
+MAX_SPEC_CHARS = 1_000_000
 
 
 def package_versions() -> dict[str, str]:
@@ -51,31 +66,165 @@ def _save_meshes(folder: Path, meshes: dict[str, trimesh.Trimesh]) -> None:
         arrays[f"{i}_key"] = np.array(key)
         arrays[f"{i}_vertices"] = np.asarray(mesh.vertices, dtype=np.float64)
         arrays[f"{i}_faces"] = np.asarray(mesh.faces, dtype=np.int64)
-    tmp = folder / f".{MESHES}.tmp.npz"
-    np.savez(tmp, **arrays)
-    tmp.replace(folder / MESHES)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    atomic_write_bytes(folder / MESHES, buf.getvalue())
 
 
 def _load_meshes(folder: Path) -> dict[str, trimesh.Trimesh]:
-    path = folder / MESHES
-    if not path.is_file():
-        raise InputError(path, None, "missing: the session's embedded meshes are gone")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            n = len([k for k in npz.files if k.endswith("_key")])
-            return {str(npz[f"{i}_key"]): trimesh.Trimesh(npz[f"{i}_vertices"], npz[f"{i}_faces"], process=False) for i in range(n)}
-    except (ValueError, OSError, EOFError, KeyError) as exc:
-        raise InputError(path, None, f"not a readable .npz file (truncated or corrupt: {exc})") from exc
+    """The embedded meshes, each checked (string key, finite (n, 3) vertices, (m, 3) faces indexing them)."""
+    path = regular_file(folder / MESHES, "the session's embedded meshes are gone")
+    arrays = read_npz(path)
+    n = len([k for k in arrays if k.endswith("_key")])
+    out = {}
+    for i in range(n):
+        key, vertices, faces = (arrays.get(f"{i}_{part}") for part in ("key", "vertices", "faces"))
+        if key is None or vertices is None or faces is None:
+            raise InputError(path, f"{i}_key", "expected the arrays <i>_key, <i>_vertices and <i>_faces for every mesh")
+        if key.dtype.kind != "U" or key.shape != ():
+            raise InputError(path, f"{i}_key", f"expected a string, got {key.dtype} of shape {key.shape}")
+        if vertices.dtype != np.float64 or vertices.ndim != 2 or vertices.shape[1] != 3 or not np.isfinite(vertices).all():
+            raise InputError(path, f"{i}_vertices", f"expected finite float64 (n, 3), got {vertices.dtype} of shape {vertices.shape}")
+        if faces.dtype.kind not in "iu" or faces.ndim != 2 or faces.shape[1] != 3 or (faces.size and (faces.min() < 0 or faces.max() >= len(vertices))):
+            raise InputError(path, f"{i}_faces", f"expected (m, 3) integer indices below {len(vertices)}")
+        out[str(key)] = trimesh.Trimesh(vertices, faces, process=False)
+    return out
 
 
-def _spec_file(text: str, name: str) -> Path:
+def _spec_file(text: str, name: str, manifest: Path) -> Path:
     """The embedded robot spec written to the user cache (content-addressed), to load it from there."""
     folder = cache_dir() / "specs" / hashlib.sha256(text.encode()).hexdigest()[:16]
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / name
-    if not path.is_file() or path.read_text() != text:
-        atomic_write_text(path, text)
+    path = file_in(folder, name, manifest, "robot_spec_name")
+    with writing(folder):
+        folder.mkdir(parents=True, exist_ok=True)
+        if path.is_symlink() or not path.is_file() or path.read_text() != text:
+            atomic_write_text(path, text)
     return path
+
+
+def step_files(name: str) -> list[str]:
+    """The files a step's result is saved in (what `save_result` writes)."""
+    return [f"{name}.npz", f"{name}.json"]
+
+
+def _fail(path: Path, field: str, message: str) -> NoReturn:
+    raise InputError(path, field, message)
+
+
+def _typed(value: Any, kind: type | tuple[type, ...], path: Path, field: str, what: str) -> Any:
+    """`value` if it is of `kind` (bools are not numbers here), else an InputError saying what was expected."""
+    if isinstance(value, bool) and bool not in (kind if isinstance(kind, tuple) else (kind,)) or not isinstance(value, kind):
+        _fail(path, field, f"expected {what}, got {type(value).__name__} {_short(value)}")
+    return value
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _seed(value: Any, path: Path, field: str) -> int:
+    _typed(value, int, path, field, "an integer seed")
+    if not 0 <= value < 2**64:
+        _fail(path, field, f"expected a seed from 0 to 2**64 - 1, got {value}")
+    return value
+
+
+def _seconds(value: Any, path: Path, field: str) -> float:
+    _typed(value, (int, float), path, field, "a number of seconds")
+    if not math.isfinite(value) or value < 0:
+        _fail(path, field, f"expected a finite number of seconds >= 0, got {value}")
+    return value
+
+
+def _finite_params(params: dict[str, Any], path: Path, field: str) -> None:
+    for key, value in params.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            _fail(path, f"{field}.{key}", f"expected a finite number, got {value}")
+
+
+def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
+    """One `steps[]` record: its keys, a known step after those it needs, and well-typed values."""
+    field = f"steps[{index}]"
+    _typed(record, dict, path, field, f"an object with {', '.join(STEP_KEYS)}")
+    for key in STEP_KEYS:
+        if key not in record:
+            _fail(path, f"{field}.{key}", "missing field")
+    unknown = sorted(set(record) - set(STEP_KEYS) - set(OPTIONAL_STEP_KEYS))
+    if unknown:
+        _fail(path, f"{field}.{unknown[0]}", "unknown field")
+    order = [s.name for s in PIPELINE]
+    name = _typed(record["name"], str, path, f"{field}.name", "a step name")
+    if name not in order:
+        _fail(path, f"{field}.name", f"no step {_short(name)} (steps: {', '.join(order)})")
+    if name in done:
+        _fail(path, f"{field}.name", f"step '{name}' is listed twice")
+    if done and order.index(name) < order.index(done[-1]):
+        _fail(path, f"{field}.name", f"step '{name}' is listed after '{done[-1]}': steps must be in pipeline order ({', '.join(order)})")
+    step = step_named(name)
+    for need in step.needs:
+        if need not in done:
+            _fail(path, f"{field}.name", f"step '{name}' needs '{need}', which is not listed before it")
+    params = _typed(record["params"], dict, path, f"{field}.params", "an object of parameters")
+    try:
+        step.make_params(params)
+    except RegraspError as exc:
+        raise InputError(path, f"{field}.params", str(exc)) from exc
+    _finite_params(params, path, f"{field}.params")
+    _seed(record["seed"], path, f"{field}.seed")
+    _seconds(record["seconds"], path, f"{field}.seconds")
+    _typed(record["stats"], dict, path, f"{field}.stats", "an object of statistics")
+    files = _typed(record["files"], list, path, f"{field}.files", "a list of file names")
+    for k, f in enumerate(files):
+        plain_name(f, path, f"{field}.files[{k}]")
+    if files != step_files(name):
+        _fail(path, f"{field}.files", f"expected {step_files(name)}, got {_short(files)}")
+    if "stage_seconds" in record:
+        for k, t in enumerate(_typed(record["stage_seconds"], list, path, f"{field}.stage_seconds", "a list of seconds")):
+            _seconds(t, path, f"{field}.stage_seconds[{k}]")
+
+
+def _only_embedded_meshes(task: dict[str, Any], meshes: dict[str, trimesh.Trimesh], path: Path) -> None:
+    """Every mesh the task names must be embedded: a session never makes regrasp read a mesh file from the disk."""
+    obj = task.get("object")
+    named = [("task.object.mesh", obj.get("mesh"))] if isinstance(obj, dict) else []
+    obstacles = task.get("obstacles")
+    for i, ob in enumerate(obstacles if isinstance(obstacles, list) else []):
+        if isinstance(ob, dict) and "mesh" in ob:
+            named.append((f"task.obstacles[{i}].mesh", ob["mesh"]))
+    for field, name in named:
+        if isinstance(name, str) and name not in meshes:
+            _fail(path, field, f"the mesh {_short(name)} is not embedded in the session's {MESHES}; a session reads no mesh file")
+
+
+def check_manifest(manifest: dict[str, Any], path: Path) -> None:
+    """Validate a whole manifest (types, names, order, finiteness) before anything touches the disk or the cache."""
+    for key in MANIFEST_KEYS:
+        if key not in manifest:
+            _fail(path, key, "missing field")
+    unknown = sorted(set(manifest) - set(MANIFEST_KEYS) - {"task_source"})
+    if unknown:
+        _fail(path, unknown[0], "unknown field")
+    version = _typed(manifest["format_version"], int, path, "format_version", "an integer format version")
+    if version > FORMAT_VERSION:
+        _fail(path, "format_version", f"format {version!r} was written by a newer regrasp; this one reads formats up to {FORMAT_VERSION}")
+    if version < 1:
+        _fail(path, "format_version", f"expected a format version from 1 to {FORMAT_VERSION}, got {version}")
+    _typed(manifest["task"], dict, path, "task", "the task as a JSON object")
+    if "task_source" in manifest:
+        _typed(manifest["task_source"], str, path, "task_source", "the task file's path as a string")
+    spec = _typed(manifest["robot_spec"], str, path, "robot_spec", "the robot spec's text")
+    if not spec.strip() or len(spec) > MAX_SPEC_CHARS:
+        _fail(path, "robot_spec", f"expected the robot spec's text (1 to {MAX_SPEC_CHARS} characters), got {len(spec)} characters")
+    plain_name(manifest["robot_spec_name"], path, "robot_spec_name")
+    _seed(manifest["seed"], path, "seed")
+    versions = _typed(manifest["versions"], dict, path, "versions", "an object of package versions")
+    for key, value in versions.items():
+        _typed(value, str, path, f"versions.{key}", "a version string")
+    done: list[str] = []
+    for i, record in enumerate(_typed(manifest["steps"], list, path, "steps", "a list")):
+        _check_step(record, i, done, path)
+        done.append(record["name"])
 
 
 class Session:
@@ -106,16 +255,17 @@ class Session:
         return (folder / MANIFEST).exists()
 
     @classmethod
-    def create(cls, folder: str | Path, scene: Scene, seed: int, force: bool = False) -> "Session":
+    def create(cls, folder: str | Path, scene: Scene, seed: int, force: bool = False) -> Session:
         """A new, empty session; an existing one is replaced only with `force`."""
         folder = Path(folder)
         if cls.exists(folder):
             if not force:
                 raise RegraspError(f"{folder} already holds a session; use --resume to continue it, or --force to replace it")
             cls._remove(folder)
-        elif folder.exists() and any(folder.iterdir()):
-            raise RegraspError(f"{folder} exists and is not empty (and holds no session): choose another folder")
-        folder.mkdir(parents=True, exist_ok=True)
+        elif folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
+            raise RegraspError(f"{folder} exists and is not an empty folder (and holds no session): choose another folder")
+        with writing(folder):
+            folder.mkdir(parents=True, exist_ok=True)
         _save_meshes(folder, scene.meshes)
         manifest = {
             "format_version": FORMAT_VERSION,
@@ -133,45 +283,40 @@ class Session:
 
     @staticmethod
     def _remove(folder: Path) -> None:
-        """Delete a session's own files (the manifest, the meshes, each step's files), nothing else."""
-        try:
-            manifest = json.loads((folder / MANIFEST).read_text())
-            files = [f for r in manifest.get("steps", []) for f in r.get("files", [])]
-        except (json.JSONDecodeError, OSError, AttributeError, TypeError):
-            files = []
-        for name in [MANIFEST, MESHES, *files]:
-            (folder / name).unlink(missing_ok=True)
+        """Delete a session's own files: the manifest, the meshes and the files a step writes; never a name read from the folder."""
+        names = [MANIFEST, MESHES, *(f for step in PIPELINE for f in step_files(step.name))]
+        with writing(folder):
+            for name in names:
+                (folder / name).unlink(missing_ok=True)
+
+    def own_files(self) -> list[Path]:
+        """The session's files (meshes, each finished step's files, the manifest last), as checked paths in its folder."""
+        names = [MESHES, *(f for r in self.records for f in r["files"]), MANIFEST]
+        return [file_in(self.folder, name, self.folder / MANIFEST, "files") for name in names]
 
     @classmethod
-    def open(cls, folder: str | Path) -> "Session":
-        """Read and check a saved session: manifest, embedded task, and every finished step's result."""
+    def open(cls, folder: str | Path) -> Session:
+        """Read and check a saved session: the whole manifest first, then the embedded task and every finished step's result."""
         folder = Path(folder)
-        path = folder / MANIFEST
-        if not path.is_file():
-            raise InputError(path, None, "no session here (session.json is missing)")
+        path = regular_file(folder / MANIFEST, "no session here (session.json is missing)")
         manifest = read_json_object(path)
-        for key in ("format_version", "task", "robot_spec", "robot_spec_name", "seed", "versions", "steps"):
-            if key not in manifest:
-                raise InputError(path, key, "missing field")
-        version = manifest["format_version"]
-        if not isinstance(version, int) or version > FORMAT_VERSION:
-            raise InputError(path, "format_version", f"format {version!r} was written by a newer regrasp; this one reads formats up to {FORMAT_VERSION}")
-        if not isinstance(manifest["task"], dict):
-            raise InputError(path, "task", "expected the task as a JSON object")
-        if not isinstance(manifest["steps"], list):
-            raise InputError(path, "steps", "expected a list")
-        spec = _spec_file(manifest["robot_spec"], manifest["robot_spec_name"])
-        scene = scene_from_dict(manifest["task"], path, robot_path=spec, meshes=_load_meshes(folder), field_prefix="task")
+        check_manifest(manifest, path)
+        spec = _spec_file(manifest["robot_spec"], manifest["robot_spec_name"], path)
+        try:
+            load_robot(spec)
+        except RegraspError as exc:
+            raise InputError(path, "robot_spec", f"the embedded robot spec is not valid: {exc}") from exc
+        meshes = _load_meshes(folder)
+        _only_embedded_meshes(manifest["task"], meshes, path)
+        try:
+            scene = scene_from_dict(manifest["task"], path, robot_path=spec, meshes=meshes, field_prefix="task")
+        except InputError:
+            raise
+        except (RegraspError, TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError) as exc:
+            raise InputError(path, "task", f"not a valid task ({type(exc).__name__}: {exc})") from exc
         session = cls(folder, manifest, scene)
-        for i, record in enumerate(manifest["steps"]):
-            field = f"steps[{i}]"
-            if not isinstance(record, dict) or any(k not in record for k in STEP_KEYS):
-                raise InputError(path, field, f"expected an object with {', '.join(STEP_KEYS)}")
-            try:
-                step_named(record["name"])
-            except RegraspError as exc:
-                raise InputError(path, f"{field}.name", str(exc)) from exc
-            session.result(record["name"])
+        for name in session.finished():
+            session.result(name)
         return session
 
     def result(self, name: str) -> Any:
@@ -193,23 +338,29 @@ class Session:
             entry["stage_seconds"] = [round(float(t), 4) for t in stage_seconds]
         order = [s.name for s in PIPELINE]
         steps = [r for r in self.records if r["name"] != step.name] + [entry]
-        self.manifest["steps"] = sorted(steps, key=lambda r: order.index(r["name"]))
-        self._write_manifest()
+        manifest = {**self.manifest, "steps": sorted(steps, key=lambda r: order.index(r["name"]))}
+        _save_manifest(self.folder, manifest)  # the manifest in memory changes only once it is on disk
+        self.manifest = manifest
 
-    def branch(self, folder: str | Path, before: str, force: bool = False) -> "Session":
+    def branch(self, folder: str | Path, before: str, force: bool = False) -> Session:
         """A new session with this one's task, seed and the finished steps before `before` (copied)."""
         order = [s.name for s in PIPELINE]
         new = Session.create(folder, self.scene, self.seed, force)
         kept = [r for r in self.records if order.index(r["name"]) < order.index(before)]
-        for r in kept:
-            for f in r["files"]:
-                shutil.copy2(self.folder / f, new.folder / f)
+        with writing(new.folder):
+            for r in kept:
+                for f in r["files"]:
+                    shutil.copyfile(file_in(self.folder, f, self.folder / MANIFEST, "files"), new.folder / f)
         new.manifest["steps"] = [dict(r) for r in kept]
         new._write_manifest()
         return new
 
     def _write_manifest(self) -> None:
-        atomic_write_text(self.folder / MANIFEST, json.dumps(self.manifest, indent=1, default=_plain))
+        _save_manifest(self.folder, self.manifest)
+
+
+def _save_manifest(folder: Path, manifest: dict[str, Any]) -> None:
+    atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1, default=_plain))
 
 
 def _plain(value: Any) -> Any:

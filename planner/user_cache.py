@@ -1,14 +1,29 @@
-"""Keys and files of the user cache (offline results keyed by a hash of everything they depend on)."""
+"""Keys and files of the user cache (offline results keyed by a hash of everything they depend on).
+
+Caches are disposable: an entry that cannot be read is deleted, recomputed, and the user told so in one line."""
 from __future__ import annotations
 
 import hashlib
 import io
+import json
+import logging
+import zipfile
+import zlib
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
+from .errors import RegraspError
 from .paths import cache_dir
-from .results import atomic_write_bytes
+from .results import atomic_write_bytes, writing
+
+T = TypeVar("T")
+log = logging.getLogger("regrasp.cache")
+# what reading a damaged entry raises: bad files, bad JSON, bad archives, missing or mistyped fields
+UNREADABLE = (RegraspError, OSError, ValueError, EOFError, KeyError, TypeError, IndexError, zipfile.BadZipFile, zlib.error,
+              json.JSONDecodeError, UnicodeDecodeError)
 
 
 def cache_key(*parts: str | bytes) -> str:
@@ -24,8 +39,23 @@ def cache_key(*parts: str | bytes) -> str:
 def cache_path(kind: str, key: str) -> Path:
     """The cache folder of one kind of result (created), joined with a key."""
     folder = cache_dir() / kind
-    folder.mkdir(parents=True, exist_ok=True)
+    with writing(folder):
+        folder.mkdir(parents=True, exist_ok=True)
     return folder / key
+
+
+def read_cached(files: Sequence[Path], read: Callable[[], T], what: str) -> T | None:
+    """`read()` of a cache entry made of `files`; None when absent, and when unreadable: the files deleted and a one-line warning."""
+    if not all(f.exists() for f in files):
+        return None
+    try:
+        return read()
+    except UNREADABLE as exc:
+        for f in files:
+            f.unlink(missing_ok=True)
+        cause = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        log.warning("warning: the cached %s in %s could not be read (%s); deleted it, recomputing", what, files[0].parent, cause)
+        return None
 
 
 def save_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
@@ -35,10 +65,14 @@ def save_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def load_arrays(path: Path) -> dict[str, np.ndarray] | None:
-    """The arrays of a cached .npz, or None when it is absent or unreadable."""
-    try:
+def load_arrays(path: Path, what: str | None = None, keys: Sequence[str] = ()) -> dict[str, np.ndarray] | None:
+    """The arrays of a cached .npz holding at least `keys`, or None when it is absent or unreadable (then deleted, with a warning);
+    `what` names the entry in the warning (default: its cache folder's name)."""
+    def read() -> dict[str, np.ndarray]:
         with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError):
-        return None
+            arrays = {k: z[k] for k in z.files}
+        missing = [k for k in keys if k not in arrays]
+        if missing:
+            raise KeyError(f"no array {missing[0]}")
+        return arrays
+    return read_cached([path], read, what or path.parent.name)

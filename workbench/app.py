@@ -13,6 +13,7 @@ import numpy as np
 import viser
 
 from planner.collision import CollisionChecker, build_collision_model
+from planner.forked import sigterm_unwinds, stop_pools
 from planner.paths import ASSETS, DEFAULT_TASK
 from planner.session import Session
 from planner.task import Scene, load_task
@@ -72,9 +73,11 @@ class Workbench:
         return f"http://{self.host}:{self.server.get_port()}"
 
     def close(self) -> None:
-        """Stop the server; a collision model still being built is dropped."""
+        """Stop the server and the workers of a run still going; a collision model still being built is dropped."""
         with self._lock:
             self._generation += 1
+        if self.session_panel.job is not None:
+            stop_pools(self.session_panel.job)
         self.server.stop()
 
     def _build_gui(self, sessions_dir: Path) -> None:
@@ -112,6 +115,13 @@ class Workbench:
     def _load(self, path: Path, client: viser.ClientHandle | None) -> None:
         """Load a task chosen in the GUI; a bad file shows its error and keeps the current task."""
         if path.resolve() == self.scene.source:
+            return
+        if self.session_panel.busy():  # the run would throw the new task away when it ends
+            message = "a step is running: wait for it to finish, then load the task"
+            self.task_error.content = f"**Not loaded:** {message}"
+            self.task_error.visible = True
+            if client is not None:
+                client.add_notification("Task not loaded", message, color="red", auto_close_seconds=10.0)
             return
         self.task_error.visible = False
         try:
@@ -264,7 +274,8 @@ def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 808
     """Start the workbench (on a task, or replaying a saved session) and serve until interrupted (Ctrl-C)."""
     workbench = Workbench(task, host, port, session=session)
     try:
-        workbench.server.sleep_forever()
+        with sigterm_unwinds():  # SIGTERM ends the server like Ctrl-C: the workers of a running step are killed too
+            workbench.server.sleep_forever()
     except KeyboardInterrupt:
         pass
     finally:

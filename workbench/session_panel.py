@@ -26,7 +26,14 @@ from .export import scene_html
 from .notify import error_text, notify_all
 from .param_inputs import ParamInputs, recorded_params
 from .session_layers import SessionLayers
-from .session_store import check_name, free_name, list_sessions, save_copy, scratch_copy, scratch_folder
+from .session_store import (
+    check_name,
+    free_name,
+    list_sessions,
+    save_copy,
+    scratch_copy,
+    scratch_folder,
+)
 from .step_table import step_table
 
 if TYPE_CHECKING:
@@ -67,7 +74,9 @@ class SessionPanel:
                 self._params_folder = gui.add_folder("Parameters")
                 self.rerun_button = gui.add_button("Re-run into a new session")
             self.export_button = gui.add_button("Export HTML", hint="Download what is shown as one HTML file that plays offline")
-        self._buttons = (self.save_button, self.load_button, self.next_button, self.until_button, self.rerun_button)
+        # disabled while a run goes, the task's "Load file" and choice included (a task loaded meanwhile would be thrown away)
+        self._buttons = (self.save_button, self.load_button, self.next_button, self.until_button, self.rerun_button,
+                         workbench.load_button, workbench.task_choice)
         self.robot_at.on_update(lambda e: self._pose_chosen(e.target.value))
         self.save_button.on_click(lambda e: self._save_clicked(e.client))
         self.load_button.on_click(lambda _: self._load_clicked())
@@ -158,14 +167,14 @@ class SessionPanel:
                 self._confirm_overwrite(client, name)
                 return
             self._save_reporting(name, overwrite=False)
-        except RegraspError as exc:
-            self._say("Not saved", str(exc), error=True)
+        except Exception as exc:  # a message in the GUI, never an exception in the callback
+            self._say("Not saved", error_text(exc), error=True)
 
     def _save_reporting(self, name: str, overwrite: bool) -> None:
         try:
             saved = self.save(name, overwrite)
-        except RegraspError as exc:
-            self._say("Not saved", str(exc), error=True)
+        except Exception as exc:  # e.g. the sessions folder is read-only or full
+            self._say("Not saved", error_text(exc), error=True)
             return
         self._say("Saved", f"the session is in {saved.folder}")
 
@@ -286,8 +295,12 @@ class SessionPanel:
         self.job.start()
         return self.job
 
+    def busy(self) -> bool:
+        """Whether a run is going (in another thread than the caller's)."""
+        return self.job is not None and self.job.is_alive() and self.job is not threading.current_thread()
+
     def _refuse_while_busy(self) -> bool:
-        busy = self.job is not None and self.job.is_alive() and self.job is not threading.current_thread()
+        busy = self.busy()
         if busy:
             self._say("Busy", "wait for the current run to finish", error=True)
         return busy

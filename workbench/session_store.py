@@ -2,13 +2,15 @@
 from __future__ import annotations
 
 import copy
+import re
 import shutil
 import tempfile
 from pathlib import Path
 
 from planner.errors import RegraspError
-from planner.paths import PROJECT_ROOT
-from planner.session import MANIFEST, MESHES, Session
+from planner.paths import PROJECT_ROOT, plain_name
+from planner.results import writing
+from planner.session import Session
 
 SESSIONS_DIR = PROJECT_ROOT / "sessions"
 
@@ -38,12 +40,19 @@ def free_name(folder: Path, base: str) -> str:
     return f"{base}-rerun-{n}"
 
 
+MAX_SESSION_NAME = 100  # characters; leaves room for `-rerun-N` and the staging folder's `.<name>.saving`
+_SESSION_NAME = re.compile(r"(?!-)[\w-]+")  # letters, digits, - and _; not starting with -
+
+
 def check_name(name: str) -> str:
-    """A session name: one plain folder name."""
+    """A session name typed by a person: letters, digits, - and _ (not first -), at most MAX_SESSION_NAME characters."""
     name = name.strip()
-    if not name or name.startswith(".") or Path(name).name != name:
-        raise RegraspError(f"'{name}' is not a session name: use one folder name (letters, digits, - and _)")
-    return name
+    shown = repr(name) if len(name) <= 40 else repr(name[:37]) + "..."
+    if len(name) > MAX_SESSION_NAME:
+        raise RegraspError(f"{shown} is too long for a session name: at most {MAX_SESSION_NAME} characters")
+    if not _SESSION_NAME.fullmatch(name):
+        raise RegraspError(f"{shown} is not a session name: use letters, digits, - and _ (not starting with -)")
+    return plain_name(name, "the Name field", "name")
 
 
 def save_copy(session: Session, target: Path, overwrite: bool = False) -> Session:
@@ -60,17 +69,25 @@ def save_copy(session: Session, target: Path, overwrite: bool = False) -> Sessio
 
 
 def _copy_files(session: Session, target: Path) -> None:
-    """Copy the session's own files into a staging folder, then swap it in for `target`."""
+    """Copy the session's own files into a staging folder, then swap it in for `target`; a failure leaves no staging folder."""
     staging = target.with_name(f".{target.name}.saving")
-    shutil.rmtree(staging, ignore_errors=True)
-    staging.mkdir(parents=True)
-    for name in [MESHES, *(f for r in session.records for f in r["files"]), MANIFEST]:
-        shutil.copy2(session.folder / name, staging / name)
-    if target.exists():
-        old = target.with_name(f".{target.name}.old")
-        shutil.rmtree(old, ignore_errors=True)
-        target.rename(old)
-        staging.rename(target)
-        shutil.rmtree(old)
-    else:
-        staging.rename(target)
+    with writing(target.parent):
+        try:
+            shutil.rmtree(staging, ignore_errors=True)
+            staging.mkdir(parents=True)
+            for path in session.own_files():
+                shutil.copyfile(path, staging / path.name)
+            if target.exists():
+                old = target.with_name(f".{target.name}.old")
+                shutil.rmtree(old, ignore_errors=True)
+                target.rename(old)
+                try:
+                    staging.rename(target)
+                except OSError:
+                    old.rename(target)  # the session saved before stays where it was
+                    raise
+                shutil.rmtree(old)
+            else:
+                staging.rename(target)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)

@@ -6,7 +6,6 @@ in order, so the roadmap depends on the seed only, never on the number of worker
 """
 from __future__ import annotations
 
-import multiprocessing
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -15,6 +14,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import CollisionModel, CollisionParams, build_collision_model
+from ..forked import worker_pool
 from ..robot import Robot
 from ..steps import Progress, no_progress
 from ..task import Scene
@@ -99,8 +99,7 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
     seeds = np.random.SeedSequence(seed).generate_state(len(arms), dtype=np.uint64)
     timings, checks = {}, {}
     workers = _workers()
-    ctx = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker, initargs=(cm, params)) as pool:
+    with worker_pool(workers, _init_worker, (cm, params)) as pool:
         t = time.perf_counter()
         progress(0.0, "elementary roadmaps (Vis-PRM)")
         jobs = [pool.submit(_vis_prm_job, dec, arm, int(s), params) for arm, s in zip(arms, seeds)]

@@ -10,7 +10,7 @@ from ..results import load_result, save_result
 from ..steps import Progress, Step, StepContext, no_progress, step_seed
 from ..task import Scene
 from ..user_cache import cache_key as hash_key
-from ..user_cache import cache_path
+from ..user_cache import cache_path, read_cached
 from .build import build_roadmap
 from .result import Roadmap, RoadmapParams
 
@@ -33,8 +33,11 @@ def roadmap_for(scene: Scene, params: RoadmapParams, seed: int, use_cache: bool 
                 progress: Progress = no_progress) -> tuple[Roadmap, bool]:
     """(the roadmap, whether it came from the cache); a built roadmap is written to the cache."""
     path = cache_path("roadmaps", cache_key(scene, params, seed))
-    if use_cache and path.with_suffix(".json").is_file():
-        return load_result(Roadmap, path.parent, path.name), True
+    if use_cache:
+        cached = read_cached([path.with_suffix(".json"), path.with_suffix(".npz")], lambda: load_result(Roadmap, path.parent, path.name),
+                             "roadmap")
+        if cached is not None:
+            return cached, True
     roadmap = build_roadmap(scene, params, seed, progress)
     save_result(roadmap, path.parent, path.name)
     return roadmap, False

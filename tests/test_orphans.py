@@ -1,0 +1,137 @@
+"""Worker processes never outlive their parent: `regrasp plan` and the workbench's background runs, killed with
+SIGKILL or stopped with SIGTERM during the grasp search, leave no worker running (checked by PID through /proc)."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from sandbox import cli_env
+from test_workbench_browser import _free_port, _wait_for
+
+WORKERS_START_WITHIN = 900.0  # s: a cold cache builds the pair set, the finger workspaces and the object model first
+WORKERS_GONE_WITHIN = 30.0  # s: a timeout, not a measurement; the kernel kills them at once
+
+WORKBENCH_RUN = """
+import sys
+from workbench import app
+
+
+class Running(app.Workbench):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.session_panel.run_until("pick_grasps")
+
+
+app.Workbench = Running
+app.run(None, "127.0.0.1", int(sys.argv[1]))
+"""
+
+
+def _children(pid: int) -> set[int]:
+    """The direct children of a process (every thread's), from /proc."""
+    out: set[int] = set()
+    for f in Path(f"/proc/{pid}/task").glob("*/children"):
+        try:
+            out |= {int(c) for c in f.read_text().split()}
+        except OSError:  # the thread ended meanwhile
+            pass
+    return out
+
+
+def _running(pid: int) -> bool:
+    """Whether a process exists and is not a zombie (a container's init may never reap re-parented ones)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state not in ("Z", "X")
+
+
+@pytest.fixture(scope="module")
+def cold_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A cache of this module's own: no grasp list is ever in it (every run here is killed), so the search always runs."""
+    return tmp_path_factory.mktemp("orphan-cache")
+
+
+@pytest.fixture
+def started(cold_cache: Path, tmp_path: Path) -> Iterator[Callable[[list[str]], tuple[subprocess.Popen, set[int]]]]:
+    """Start a command and wait until it has forked its grasp-search workers; killed at the end if still running."""
+    procs: list[subprocess.Popen] = []
+    seen: set[int] = set()
+
+    def start(command: list[str]) -> tuple[subprocess.Popen, set[int]]:
+        proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                                env=cli_env(REGRASP_CACHE=str(cold_cache)))
+        procs.append(proc)
+        assert _wait_for(lambda: len(_children(proc.pid)) >= 2 or proc.poll() is not None, WORKERS_START_WITHIN)
+        workers = _children(proc.pid)
+        seen.update(workers)
+        assert proc.poll() is None and len(workers) >= 2, proc.stderr.read() if proc.stderr else ""
+        return proc, workers
+
+    yield start
+    for proc in procs:  # whatever a failed test left: the process it started, then the workers seen, by PID
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    for pid in seen:
+        if _running(pid):
+            os.kill(pid, signal.SIGKILL)
+
+
+def _plan(out: Path) -> list[str]:
+    return [sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(out)]
+
+
+def _workbench() -> list[str]:
+    return [sys.executable, "-c", WORKBENCH_RUN, str(_free_port())]
+
+
+@pytest.mark.parametrize("command", ["plan", "workbench"])
+def test_sigkill_leaves_no_worker(started, tmp_path: Path, command: str) -> None:
+    proc, workers = started(_plan(tmp_path / "s") if command == "plan" else _workbench())
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert _wait_for(lambda: not any(_running(w) for w in workers), WORKERS_GONE_WITHIN), \
+        f"workers {sorted(w for w in workers if _running(w))} outlived their killed parent"
+
+
+def test_sigterm_of_plan_stops_its_workers_with_a_message(started, tmp_path: Path) -> None:
+    out = tmp_path / "s"
+    proc, workers = started(_plan(out))
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=120) == 128 + signal.SIGTERM
+    stderr = proc.stderr.read() if proc.stderr else ""
+    assert "Traceback" not in stderr and "error: terminated (SIGTERM)" in stderr, stderr
+    assert not any(_running(w) for w in workers)
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [], "a temporary file was left in the session"
+    assert [p.name for p in tmp_path.iterdir()] == ["s"], "the run wrote beside its session folder"
+
+
+def test_sigterm_of_the_workbench_stops_a_running_steps_workers(started) -> None:
+    proc, workers = started(_workbench())
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=120) == 0
+    stderr = proc.stderr.read() if proc.stderr else ""
+    assert "Traceback" not in stderr, stderr
+    assert not any(_running(w) for w in workers)
+
+
+def test_worker_pool_kills_its_workers_when_the_caller_raises() -> None:
+    """In process: an exception (Ctrl-C, SIGTERM) in the parent kills the pool's workers instead of waiting for their jobs."""
+    from planner.forked import worker_pool
+
+    before = _children(os.getpid())
+    with pytest.raises(KeyboardInterrupt), worker_pool(2) as pool:
+        for _ in range(2):
+            pool.submit(time.sleep, 600)
+        assert _wait_for(lambda: len(_children(os.getpid()) - before) >= 2, 60)
+        workers = _children(os.getpid()) - before
+        raise KeyboardInterrupt
+    assert not any(_running(w) for w in workers)
