@@ -128,7 +128,7 @@ def test_lazy_transit_goes_around_the_object(example):
     q_start, q_goal = scene.q_initial, roadmap.node_q[nodes[np.argmax(np.linalg.norm(roadmap.wrists[nodes, 0] - roadmap.wrists[nodes[0], 0], axis=1))]]
     space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
     free = make_validity(situation_model(cm, shape, Situation(None, np.diag([1.0, 1, 1, 1]) @ _far()), (), idx), profile, "moving")
-    first = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, TransitParams(), np.random.default_rng(0),
+    first = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TransitParams(), np.random.default_rng(0),
                         TransitStats()).query(q_start, q_goal)
     # the object where the first path's wrist passes, half way along
     mid = first[len(first) // 2]
@@ -142,7 +142,7 @@ def test_lazy_transit_goes_around_the_object(example):
     blocked = make_validity(situation_model(cm, shape, situation, (), idx), profile, "moving")
     assert not blocked.state_valid(mid), "the object must block the first path"
     stats = TransitStats()
-    path = LazyTransit(MotionGraph(roadmap), space, blocked.on("changed"), blocked, TransitParams(), np.random.default_rng(0),
+    path = LazyTransit(MotionGraph(roadmap), space, blocked.on("changed"), blocked, blocked, TransitParams(), np.random.default_rng(0),
                        stats).query(q_start, q_goal)
     assert stats.searches > 1, "the first path must have been rejected and the graph searched again"
     assert not np.any(np.all(np.isclose(path, mid), axis=1)), "the blocked configuration is not on the new path"
@@ -157,3 +157,36 @@ def _far() -> np.ndarray:
     T = np.eye(4)
     T[:3, 3] = [5.0, 5.0, 5.0]
     return T
+
+
+@pytest.mark.slow
+def test_rrt_reconnects_what_the_graph_cannot(example):
+    """With every roadmap edge gone, start and goal far apart share no neighbour: only RRTConnect can join them, and its
+    path joins the graph."""
+    import dataclasses
+
+    from planner.collision import build_collision_model
+    from planner.geometry import coal_mesh
+    from planner.motion.graph import MotionGraph
+    from planner.motion.situation import Situation, situation_model
+    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+    from planner.motion.validity import make_validity, transit_profile
+
+    scene, roadmap, _ = example
+    robot = scene.robot
+    cut = dataclasses.replace(roadmap, edge_valid=np.zeros(len(roadmap.edges), dtype=bool))
+    idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
+    space = JointSpace.of(robot.lower, robot.upper, idx, scene.q_initial)
+    cm = build_collision_model(robot, scene.environment)
+    validity = make_validity(situation_model(cm, coal_mesh(scene.object_mesh), Situation(None, _far()), (), idx),
+                             transit_profile(roadmap.resolution, 0.02, 0.008), "moving")
+    q_start = scene.q_initial
+    q_goal = roadmap.node_q[int(np.argmax(space.distance(roadmap.node_q, q_start)))]
+    graph, stats = MotionGraph(cut), TransitStats()
+    edges_before = len(graph.edges)
+    path = LazyTransit(graph, space, validity.on("changed"), validity, validity, TransitParams(max_connections=8), np.random.default_rng(1),
+                       stats).query(q_start, q_goal)
+    assert stats.rrt_calls >= 1 and stats.nodes_validating > 0
+    assert len(graph.edges) > edges_before + 16, "the reconnection's path joined the graph"
+    assert np.allclose(path[0], q_start) and np.allclose(path[-1], q_goal)
+    assert validity.path_valid(path) and all(space.holds(q) for q in path)

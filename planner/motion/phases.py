@@ -206,20 +206,23 @@ class PhasePlanner:
         model = self.model(situation, q_start, self.transit_idx)
         ends = [clearances(model, q, "moving") for q in (q_start, q_goal)]
         profile = fitted(self.transit_profile, {k: min(e[k] for e in ends) for k in ends[0]})
-        full = make_validity(model, profile, "moving")
+        near = make_validity(model, profile, "moving")  # what touches the ends: as dense as they need
+        full = near if profile == self.transit_profile else make_validity(model, self.transit_profile, "moving")
         for name, q in (("start", q_start), ("goal", q_goal)):
-            if not full.state_valid(q):
-                raise PieceFailed(phase, "transit", f"its {name} configuration collides ({_pairs(full.first_collision(q[None]))})")
+            if not near.state_valid(q):
+                raise PieceFailed(phase, "transit", f"its {name} configuration collides ({_pairs(near.first_collision(q[None]))})")
         stats = self.stats[phase]
         try:
             if self.baseline:
-                path = rrt_transit(space, full, q_start, q_goal, self.transit_params, self.rng, stats)
+                full = near  # a single query cannot tell the ends' neighbourhood from the rest: it checks as densely
+                path = rrt_transit(space, near, q_start, q_goal, self.transit_params, self.rng, stats)
             else:
-                path = LazyTransit(self.graph, space, full.on("changed"), full, self.transit_params, self.rng, stats).query(q_start, q_goal)
+                path = LazyTransit(self.graph, space, full.on("changed"), full, near, self.transit_params, self.rng,
+                                   stats).query(q_start, q_goal)
         except TransitFailed as exc:
             raise PieceFailed(phase, "transit", str(exc)) from exc
         t = time.perf_counter()
-        path = shortcut(path, full, self.rng, self.transit_params.shortcut_attempts)
+        path = shortcut(path, full, near, self.rng, self.transit_params.shortcut_attempts)
         stats.seconds_shortcut += time.perf_counter() - t
         return Piece(phase, "transit", path, situation)
 

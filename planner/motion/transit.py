@@ -66,11 +66,14 @@ def _rrt(space: JointSpace, full: Validity, qa: np.ndarray, qb: np.ndarray, seed
 
 
 class LazyTransit:
-    """Transit queries of one phase on the shared graph: `lazy` checks roadmap elements, `full` everything else."""
+    """Transit queries of one phase on the shared graph: `lazy` checks roadmap elements, `full` everything else, and
+    `near` (denser: paddings fitted to the query's ends) whatever touches the start or the goal."""
 
-    def __init__(self, graph: MotionGraph, space: JointSpace, lazy: Validity, full: Validity, params: TransitParams,
-                 rng: np.random.Generator, stats: TransitStats):
-        self.graph, self.space, self.lazy, self.full, self.p, self.rng, self.stats = graph, space, lazy, full, params, rng, stats
+    def __init__(self, graph: MotionGraph, space: JointSpace, lazy: Validity, full: Validity, near: Validity,
+                 params: TransitParams, rng: np.random.Generator, stats: TransitStats):
+        self.graph, self.space, self.lazy, self.full, self.near, self.p, self.rng, self.stats = \
+            graph, space, lazy, full, near, params, rng, stats
+        self.ends: tuple[int, ...] = ()
         self.status = PhaseStatus(graph)
         self.joined: dict[int, int] = {}  # query end -> how many nearest nodes it was joined to
 
@@ -113,7 +116,7 @@ class LazyTransit:
     def _node_valid(self, n: int) -> bool:
         st = self.status
         if st.node[n] == 0:
-            check = self.lazy if n < self.graph.n_roadmap else self.full
+            check = self.lazy if n < self.graph.n_roadmap else self.near if n in self.ends else self.full
             st.node[n] = VALID if check.state_valid(self._config(n)) else INVALID
         return st.node[n] == VALID
 
@@ -121,7 +124,7 @@ class LazyTransit:
         st, g = self.status, self.graph
         k = g.edge_id(u, v)
         if st.edge[k] == 0:
-            check = self.lazy if g.offline[k] else self.full
+            check = self.lazy if g.offline[k] else self.near if u in self.ends or v in self.ends else self.full
             ok = check.motion_valid(self._config(u), self._config(v), ends=False)
             st.edge[k] = VALID if ok else INVALID
             self.stats.edges_invalidated += int(not ok)
@@ -152,10 +155,11 @@ class LazyTransit:
         """A valid polyline (full configurations) from q_start to q_goal; both ends must be valid states."""
         stats = self.stats
         t0 = time.perf_counter()
-        if self.full.motion_valid(q_start, q_goal, ends=False):
+        if self.near.motion_valid(q_start, q_goal, ends=False):
             stats.seconds_planning += time.perf_counter() - t0
             return np.stack([q_start, q_goal])
         start, goal = self._connect(q_start), self._connect(q_goal)
+        self.ends = (start, goal)
         self.status.grow()
         self.status.node[[start, goal]] = VALID
         stats.seconds_planning += time.perf_counter() - t0
@@ -183,7 +187,7 @@ class LazyTransit:
                 continue
             a, b = self._bounds(last, start, goal)
             stats.rrt_calls += 1
-            found = _rrt(self.space, self.full, self._config(a), self._config(b), int(self.rng.integers(2**31)), self.p.reconnect_time,
+            found = _rrt(self.space, self.near if a in self.ends or b in self.ends else self.full, self._config(a), self._config(b), int(self.rng.integers(2**31)), self.p.reconnect_time,
                          self.p.rrt_step)
             if found is not None:
                 ids = self.graph.add_nodes(found[1:-1])
@@ -214,8 +218,9 @@ def rrt_transit(space: JointSpace, full: Validity, q_start: np.ndarray, q_goal: 
     return found
 
 
-def shortcut(path: np.ndarray, full: Validity, rng: np.random.Generator, attempts: int) -> np.ndarray:
-    """Random shortcuts between two points of the polyline (by arc length), kept when the straight motion is valid."""
+def shortcut(path: np.ndarray, full: Validity, near: Validity, rng: np.random.Generator, attempts: int) -> np.ndarray:
+    """Random shortcuts between two points of the polyline (by arc length), kept when the straight motion is valid
+    (checked with `near` when it leaves the first segment or reaches the last: close to the ends)."""
     path = np.array(path, dtype=float)
     for _ in range(attempts):
         if len(path) < 3:
@@ -228,7 +233,7 @@ def shortcut(path: np.ndarray, full: Validity, rng: np.random.Generator, attempt
             continue
         a = path[i] + (s1 - cum[i]) / max(seg[i], 1e-12) * (path[i + 1] - path[i])
         b = path[j] + (s2 - cum[j]) / max(seg[j], 1e-12) * (path[j + 1] - path[j])
-        if full.motion_valid(a, b, ends=False):
+        if (near if i == 0 or j == len(seg) - 1 else full).motion_valid(a, b, ends=False):
             path = np.concatenate([path[: i + 1], [a, b], path[j + 1:]])
     return _drop_duplicates(path)
 
