@@ -131,12 +131,13 @@ def defect(mesh: trimesh.Trimesh) -> str:
     return "" if volume > 0 else f"it encloses no volume (volume {volume:.3g} m^3)"
 
 
-def likely_unit(size: float, limits: SizeLimits) -> str:
-    """A hint naming the unit a mesh of this largest extent was probably exported in, with the task's `scale` to set."""
-    if size > limits.high:
-        unit, metres = min(UNITS.items(), key=lambda u: abs(np.log(size * u[1] / limits.typical)))
+def likely_unit(size: float, typical: float) -> str:
+    """A hint naming the unit a mesh of this largest extent (m) was probably exported in, if it should be about
+    `typical`, with the task's `scale` to set."""
+    if size > typical:
+        unit, metres = min(UNITS.items(), key=lambda u: abs(np.log(size * u[1] / typical)))
         return f"is it in {unit}? then set scale = {metres:g} for this mesh in the task file, or export it in metres"
-    factor = 10.0 ** round(np.log10(limits.typical / size))
+    factor = 10.0 ** round(np.log10(typical / size))
     return (f"is it in the wrong unit or scaled down? set scale (e.g. scale = {factor:g}) for this mesh in the task file, "
             "or export it in metres")
 
@@ -178,7 +179,7 @@ def load_mesh(path: str | Path, limits: SizeLimits = OBJECT_LIMITS, options: Mes
     if size < limits.low or size > limits.high:
         shown = f" (after scale = {options.scale:g})" if options.scale != 1.0 else ""
         raise InputError(path, None, f"has an absurd size for an {limits.what}: its largest extent is {size:.6g} m{shown}, "
-                                     f"expected between {limits.low:g} m and {limits.high:g} m ({likely_unit(size, limits)})")
+                                     f"expected between {limits.low:g} m and {limits.high:g} m ({likely_unit(size, limits.typical)})")
     if problem:
         raise InputError(path, None, f"is not a closed volume after repair: {problem}; "
                                      "expected a closed, watertight surface around a solid")
