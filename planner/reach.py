@@ -2,8 +2,10 @@
 
 The grasp centre is the mean of the fingertips at the hand's open configuration, in the palm
 frame: where an object sits when the hand closes on it. Position-only damped least squares from
-several seeds; a solution counts only if it respects joint limits and the arm and hand collide
-with nothing (the manipulated object itself is not in the collision model).
+several seeds; a solution counts only if it respects joint limits and the arm and the palm collide
+with nothing (the manipulated object itself is not in the collision model). The fingers are left
+out: open, they reach past the grasp centre into the support of a low object, and they close on
+the object anyway; each grasp's fingers are checked with its configuration (grasp_configs.py).
 """
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from .collision import CollisionChecker
-from .robot import Robot
+from .robot import Robot, joint_at
 from .steps import Progress, no_progress
 from .task import Scene
 
@@ -77,12 +79,19 @@ def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, o
     return q
 
 
+def finger_geometries(robot: Robot, checker: CollisionChecker, arm: str) -> frozenset[str]:
+    """Names of the collision geometries the fingers of an arm's hand carry."""
+    joints = {joint_at(robot.model, int(i)) for i in robot.hand_idx[arm]}
+    return frozenset(o.name for o in checker.cm.geometry.geometryObjects if o.parentJoint in joints)
+
+
 def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray, rng: np.random.Generator,
           seeds: int = 32, tolerance: float = 0.02) -> ReachResult:
     """Try `seeds` starts (rest first, then random torso+arm); reachable if one ends within tolerance, collision-free."""
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
     offset = grasp_centre(robot, arm)
     data = robot.model.createData()
+    fingers = finger_geometries(robot, checker, arm)
     best, closest, collided = np.inf, robot.q_rest, False
     for s in range(seeds):
         q0 = robot.q_rest.copy()
@@ -94,7 +103,7 @@ def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray,
         if d < best:
             best, closest = d, q
         if d <= tolerance:
-            if not checker.in_collision(q, arm):
+            if not checker.in_collision(q, arm) or not any(fingers.isdisjoint(pair) for pair in checker.colliding_pairs(q, arm)):
                 return ReachResult(arm, True, d, q)
             collided = True
     return ReachResult(arm, False, best, closest, collided)

@@ -18,6 +18,9 @@ import trimesh
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TASK = ROOT / "assets" / "tasks" / "default.toml"
+ROBOT = tomllib.loads(DEFAULT_TASK.read_text())["robot"]
+# The default task's text with its robot spec given by absolute path, so a copy runs from any folder.
+TASK_TEXT_ROBOT = DEFAULT_TASK.read_text().replace(f'robot = "{ROBOT}"', f'robot = "{ROOT / "assets" / "robots" / ROBOT}"')
 SUCCESS_RATE = 0.85  # issue 13: at least this fraction of (object, placement) pairs reach double grasps
 
 
@@ -82,7 +85,7 @@ class Placement:
 PLACEMENTS = {
     "paper": Placement((0.45, -0.85, 0.72, 1.2), (0.50, 0.85, 0.72, 2.7)),
     "turned": Placement((0.50, -0.82, 0.72, 0.3), (0.55, 0.82, 0.72, -0.6)),
-    "near_edge": Placement((0.40, -0.88, 0.72, 2.2), (0.48, 0.88, 0.72, 1.6)),
+    "near_edge": Placement((0.40, -0.88, 0.72, 2.2), (0.56, 0.90, 0.72, 1.6)),
 }
 
 
@@ -98,14 +101,13 @@ def write_object(name: str, folder: Path) -> Path:
 
 def write_task(object_path: Path, placement: str, folder: Path) -> Path:
     """The default task with this object at this placement, as a TOML file in `folder`."""
-    text = DEFAULT_TASK.read_text()
-    data = tomllib.loads(text)
+    text = TASK_TEXT_ROBOT
     p = PLACEMENTS[placement]
     old = text[text.index("[object]"):text.index("\n\n", text.index("[object]"))]
     new = "\n".join(["[object]", f'mesh = "{object_path}"',
                      *(f"{k} = {{ xyz = [{x}, {y}, {z}], rpy = [0.0, 0.0, {yaw}] }}" for k, (x, y, z, yaw)
                        in (("initial", p.initial), ("final", p.final)))])
-    text = text.replace(old, new).replace(f'robot = "{data["robot"]}"', f'robot = "{ROOT / "assets" / "robots" / data["robot"]}"')
+    text = text.replace(old, new)
     path = folder / f"{object_path.stem}-{placement}.toml"
     path.write_text(text)
     return path

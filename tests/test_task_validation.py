@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from generated_objects import TASK_TEXT_ROBOT
 from planner.arms import decide, geometric_median
 from planner.check import InvalidTask, check_task, hand_opening, require_valid, validate_task
 from planner.collision import build_collision_model
@@ -30,8 +31,7 @@ from planner.statuette import STATUETTE_PATH
 from planner.steps import StepFailed
 from planner.task import MAX_OBSTACLES, load_task
 
-ALEX = ASSETS / "robots" / "alex_allegro.toml"
-TASK_TEXT = (ASSETS / "tasks" / "default.toml").read_text().replace('robot = "alex_allegro.toml"', f'robot = "{ALEX}"')
+TASK_TEXT = TASK_TEXT_ROBOT
 
 
 def _task(tmp_path: Path, text: str = TASK_TEXT, name: str = "task.toml") -> Path:
