@@ -123,12 +123,13 @@ def size_warnings(scene: Scene) -> list[str]:
     opening = max(hand_opening(h) for h in hands)
     tip = min(f.tip_radius for h in hands for f in h.fingers)
     if extents[0] > opening:
-        return [f"the object is {extents[0]:.3g} m across at its narrowest, wider than the robot's hands open "
-                f"({opening:.3g} m between the thumb's and another fingertip, from the robot spec's hands): no grasp can "
-                f"close on it ({likely_unit(extents[-1], OBJECT_LIMITS.typical)})"]
+        return [(f"the object is {extents[0]:.3g} m across at its narrowest, wider than the robot's hands open "
+                 f"({opening:.3g} m between the thumb's and another fingertip, from the robot spec's hands): no grasp can "
+                 f"close on it ({likely_unit(extents[-1], OBJECT_LIMITS.typical)})")]
     if extents[-1] < 4 * tip:
-        return [f"the object is {extents[-1]:.3g} m long at its largest, less than four fingertip radii ({4 * tip:.3g} m, "
-                f"from the robot spec's hands): three fingertips cannot touch it at once ({likely_unit(extents[-1], OBJECT_LIMITS.typical)})"]
+        return [(f"the object is {extents[-1]:.3g} m long at its largest, less than four fingertip radii ({4 * tip:.3g} m, "
+                 f"from the robot spec's hands): three fingertips cannot touch it at once "
+                 f"({likely_unit(extents[-1], OBJECT_LIMITS.typical)})")]
     return []
 
 
@@ -161,8 +162,9 @@ def require_valid(scene: Scene, warn: Callable[[str], None]) -> Validation:
     return v
 
 
-def check_task(scene: Scene, cm: CollisionModel | None = None, params: ArmsParams = ArmsParams()) -> TaskReport:
+def check_task(scene: Scene, cm: CollisionModel | None = None, params: ArmsParams | None = None) -> TaskReport:
     """Run every check of a task; problems are collected, not raised, so the summary is complete."""
+    params = params or ArmsParams()
     robot = scene.robot
     cm = cm or build_collision_model(robot, scene.environment)
     dof = {"total": robot.nq, "torso": len(robot.torso_idx)}

@@ -19,13 +19,13 @@ import numpy as np
 
 from .arm_ik import ArmIK
 from .config_score import ConfigScorer, ScoreWeights
+from .forked import forked_map
 from .grasps import GraspList
 from .hand_model import load_hand_model
 from .hand_placement import ObstacleTest, posed_shapes
 from .object_collision import ObjectCollision
 from .results import array
 from .robot import Robot
-from .forked import forked_map
 from .stages import StageLog
 from .steps import Step, StepContext
 from .task import Scene

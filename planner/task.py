@@ -14,9 +14,16 @@ import numpy as np
 import trimesh
 
 from .environment import SHAPES, Environment, Obstacle
-from .geometry import pose
 from .errors import InputError
-from .object_mesh import OBJECT_LIMITS, OBSTACLE_LIMITS, UP_AXES, MeshOptions, SizeLimits, load_mesh
+from .geometry import pose
+from .object_mesh import (
+    OBJECT_LIMITS,
+    OBSTACLE_LIMITS,
+    UP_AXES,
+    MeshOptions,
+    SizeLimits,
+    load_mesh,
+)
 from .paths import ASSETS
 from .robot import Robot, load_robot
 from .tomlread import Table, load_toml

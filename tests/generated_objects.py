@@ -82,10 +82,10 @@ class Placement:
     final: tuple[float, float, float, float]
 
 
-PLACEMENTS = {
-    "paper": Placement((0.45, -0.85, 0.72, 1.2), (0.50, 0.85, 0.72, 2.7)),
-    "turned": Placement((0.50, -0.82, 0.72, 0.3), (0.55, 0.82, 0.72, -0.6)),
-    "near_edge": Placement((0.40, -0.88, 0.72, 2.2), (0.56, 0.90, 0.72, 1.6)),
+PLACEMENTS = {  # each needs the handover: only the right arm reaches the initial pose, only the left the final one
+    "paper": Placement((0.45, -0.85, 0.72, 1.2), (0.50, 0.85, 0.72, 2.7)),  # the default task's, under the lamp
+    "turned": Placement((0.62, -0.82, 0.72, 0.3), (0.62, 0.86, 0.72, -0.6)),
+    "far": Placement((0.70, -0.80, 0.72, 2.2), (0.70, 0.80, 0.72, 1.6)),
 }
 
 

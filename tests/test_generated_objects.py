@@ -5,8 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from generated_objects import (
+    PLACEMENTS,
+    SUCCESS_RATE,
+    TASK_TEXT_ROBOT,
+    plan_outcome,
+    succeeded,
+    success_table,
+)
 
-from generated_objects import PLACEMENTS, SUCCESS_RATE, TASK_TEXT_ROBOT, plan_outcome, success_table, succeeded
 from planner.object_mesh import load_object_mesh
 from planner.statuette import STATUETTE_PATH
 
