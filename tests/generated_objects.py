@@ -82,10 +82,10 @@ class Placement:
     final: tuple[float, float, float, float]
 
 
-PLACEMENTS = {  # each needs the handover: only the right arm reaches the initial pose, only the left the final one
-    "paper": Placement((0.45, -0.85, 0.72, 1.2), (0.50, 0.85, 0.72, 2.7)),  # the default task's, under the lamp
-    "turned": Placement((0.62, -0.82, 0.72, 0.3), (0.62, 0.86, 0.72, -0.6)),
-    "far": Placement((0.70, -0.80, 0.72, 2.2), (0.70, 0.80, 0.72, 1.6)),
+PLACEMENTS = {  # the right hand picks, the left places; the tasks ask for the handover (nearer the middle both arms reach)
+    "behind_lamp": Placement((0.45, -0.85, 0.72, 1.2), (0.62, 0.90, 0.72, 2.7)),  # the default task's pick
+    "turned": Placement((0.50, -0.80, 0.72, 0.8), (0.62, 0.78, 0.72, 0.0)),
+    "nearer": Placement((0.55, -0.72, 0.72, 2.0), (0.64, 0.68, 0.72, -0.8)),
 }
 
 
@@ -100,11 +100,11 @@ def write_object(name: str, folder: Path) -> Path:
 
 
 def write_task(object_path: Path, placement: str, folder: Path) -> Path:
-    """The default task with this object at this placement, as a TOML file in `folder`."""
+    """The default task with this object at this placement, asking for a handover, as a TOML file in `folder`."""
     text = TASK_TEXT_ROBOT
     p = PLACEMENTS[placement]
     old = text[text.index("[object]"):text.index("\n\n", text.index("[object]"))]
-    new = "\n".join(["[object]", f'mesh = "{object_path}"',
+    new = "\n".join(["handover = true", "", "[object]", f'mesh = "{object_path}"',
                      *(f"{k} = {{ xyz = [{x}, {y}, {z}], rpy = [0.0, 0.0, {yaw}] }}" for k, (x, y, z, yaw)
                        in (("initial", p.initial), ("final", p.final)))])
     text = text.replace(old, new)

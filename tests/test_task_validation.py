@@ -337,3 +337,34 @@ def test_reach_is_the_same_in_check_and_the_arms_step(tmp_path, default_scene):
     for placement, per_arm in report.reach.items():
         for arm, r in per_arm.items():
             assert math.isclose(arms.distances[placement][arm], r.distance)
+
+
+# --- grasp and place configurations --------------------------------------------------------------
+
+def test_wide_starts_find_place_configurations_the_near_rest_ones_miss(default_scene):
+    from planner.config_score import ConfigScorer
+    from planner.grasp_configs import ConfigSampler, GraspConfigParams, environment_filter, hand_configurations
+    from planner.grasps import GraspParams, grasp_list
+    from planner.hand_placement import ObstacleTest
+    from planner.object_collision import ObjectCollision
+
+    robot = default_scene.robot
+    grasps, _ = grasp_list(robot.spec, "left", default_scene.object_mesh, GraspParams(positions=30, orientations=30), 1)
+    collision = ObjectCollision(default_scene)
+    free = environment_filter(robot, grasps, default_scene.object_final,
+                              ObstacleTest.of_environment(default_scene.environment, collision.model.params.env_padding))
+    found = {}
+    for wide in (0, 16):
+        p = GraspConfigParams(wide_attempts=wide)
+        sampler = ConfigSampler(robot, collision, ConfigScorer(robot, p.weights()), p)
+        configs = hand_configurations(sampler, grasps, np.flatnonzero(free), default_scene.object_final, robot.q_rest,
+                                      np.random.default_rng(0))
+        found[wide] = set(configs.rank.tolist())
+        for q in configs.q:
+            assert robot.within_limits(q) and not collision.in_collision(q, default_scene.object_final, ("left",))
+    assert found[0] < found[16]  # the same grasps and more: the wide starts only run for grasps the first ones missed
+    spread = np.std([ConfigSampler(robot, collision, None, GraspConfigParams()).body(np.random.default_rng(k), ["right"], wide=True)
+                     [robot.torso_idx] for k in range(50)], axis=0)
+    t = robot.torso_idx
+    uniform = (robot.upper[t] - robot.lower[t]) / np.sqrt(12)  # the spread of a uniform draw over each range
+    assert np.all(np.abs(spread / uniform - 1) < 0.3) and np.all(spread > 2 * GraspConfigParams().torso_sigma)
