@@ -88,14 +88,19 @@ def _reached(reaches: dict[str, dict[str, ReachResult]], name: str) -> list[str]
     return [a for a, r in reaches[name].items() if r.reachable]
 
 
+def forced_decision(scene: Scene, forced: tuple[str, str]) -> Decision:
+    """The arms the step's parameters force, or a RegraspError when they are not two different arms of the robot."""
+    names = scene.robot.spec.arm_names
+    if not all(a in names for a in forced) or forced[0] == forced[1]:
+        raise RegraspError(f"arms: picking_arm and placing_arm must be two different arms of the robot ({', '.join(names)}); "
+                           f"got '{forced[0]}' and '{forced[1]}'")
+    return Decision(*forced, True, "forced by the step's parameters", {}, "")
+
+
 def decide(scene: Scene, reaches: dict[str, dict[str, ReachResult]], forced: tuple[str, str] = ("", "")) -> Decision:
     """Choose the arms from each arm's reach of each placement (see the module docstring); `forced` overrides."""
-    names = scene.robot.spec.arm_names
     if any(forced):
-        if not all(a in names for a in forced) or forced[0] == forced[1]:
-            raise RegraspError(f"arms: picking_arm and placing_arm must be two different arms of the robot ({', '.join(names)}); "
-                               f"got '{forced[0]}' and '{forced[1]}'")
-        return Decision(*forced, True, "forced by the step's parameters", {}, "")
+        return forced_decision(scene, forced)
     initial, final = _reached(reaches, "initial"), _reached(reaches, "final")
     pairs = [(a, b) for a in initial for b in final if a != b]
     costs = {f"{a}>{b}": round(exchange_cost_estimate(scene, a, b, reaches["initial"][a].q, reaches["final"][b].q), 4)
@@ -128,6 +133,8 @@ def decide(scene: Scene, reaches: dict[str, dict[str, ReachResult]], forced: tup
 
 def assign_arms(ctx: StepContext) -> ArmAssignment:
     scene, p = ctx.scene, ctx.params
+    if p.picking_arm or p.placing_arm:
+        forced_decision(scene, (p.picking_arm, p.placing_arm))  # bad names are refused before the reach search
     checker = build_collision_model(scene.robot, scene.environment).checker()
     reaches = placement_reach(scene, checker, p.seeds, p.tolerance, ctx.progress)
     d = decide(scene, reaches, (p.picking_arm, p.placing_arm))

@@ -368,3 +368,14 @@ def test_wide_starts_find_place_configurations_the_near_rest_ones_miss(default_s
     t = robot.torso_idx
     uniform = (robot.upper[t] - robot.lower[t]) / np.sqrt(12)  # the spread of a uniform draw over each range
     assert np.all(np.abs(spread / uniform - 1) < 0.3) and np.all(spread > 2 * GraspConfigParams().torso_sigma)
+
+
+def test_forced_arms_are_checked_before_the_reach_search(tmp_path, default_scene):
+    from planner.errors import RegraspError
+
+    session = Session.create(tmp_path / "s", default_scene, 0)
+    with pytest.raises(RegraspError, match=r"two different arms of the robot \(right, left\); got 'middle' and 'left'"):
+        run_pipeline(session, "arms", {"arms": {"picking_arm": "middle", "placing_arm": "left"}})
+    run_pipeline(session, "arms", {"arms": {"picking_arm": "left", "placing_arm": "right"}})  # forcing stays possible
+    arms = session.result("arms")
+    assert (arms.picking_arm, arms.placing_arm, arms.choice) == ("left", "right", "forced by the step's parameters")
