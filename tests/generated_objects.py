@@ -64,9 +64,9 @@ def _mug() -> trimesh.Trimesh:
 
 OBJECTS: dict[str, Callable[[], trimesh.Trimesh]] = {
     "box_long": lambda: trimesh.creation.box([0.22, 0.06, 0.07]),
-    "box_cube": lambda: trimesh.creation.box([0.10, 0.10, 0.10]),
+    "box_cube": lambda: trimesh.creation.box([0.15, 0.15, 0.15]),  # a 10 cm cube has room for one Allegro hand only
     "cylinder_tall": lambda: trimesh.creation.cylinder(radius=0.03, height=0.20, sections=48),
-    "cylinder_squat": lambda: trimesh.creation.cylinder(radius=0.055, height=0.10, sections=48),
+    "cylinder_squat": lambda: trimesh.creation.cylinder(radius=0.08, height=0.12, sections=48),
     "torus": lambda: trimesh.creation.torus(major_radius=0.065, minor_radius=0.022, major_sections=48, minor_sections=20),
     "mug": _mug,
     "dachshund": lambda: _animal(body=0.13, neck=(0.03, 0.05), leg=0.035, radius=0.025),
@@ -131,10 +131,11 @@ def plan_outcome(task: Path, out: Path, seed: int = 0) -> str:
     return f"{session.result('double_grasps').stats()['double_grasps']} double grasps"
 
 
-def success_table(folder: Path, seed: int = 0, report: Callable[[str], None] = print) -> list[tuple[str, str, str]]:
-    """Plan every object at every placement; report each row as it finishes; return (object, placement, outcome)."""
+def success_table(folder: Path, seed: int = 0, report: Callable[[str], None] = print,
+                  names: tuple[str, ...] = tuple(OBJECTS)) -> list[tuple[str, str, str]]:
+    """Plan every object (of `names`) at every placement; report each row as it finishes; return (object, placement, outcome)."""
     rows = []
-    for name in OBJECTS:
+    for name in names:
         mesh = write_object(name, folder)
         for placement in PLACEMENTS:
             outcome = plan_outcome(write_task(mesh, placement, folder), folder / f"{name}-{placement}", seed)
@@ -152,10 +153,11 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="/tmp/regrasp-generated-objects")
+    parser.add_argument("--objects", nargs="+", choices=list(OBJECTS), default=list(OBJECTS), help="only these objects")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print("| object | placement | outcome |\n| --- | --- | --- |", flush=True)
-    table = success_table(out, args.seed, lambda row: print(row, flush=True))
+    table = success_table(out, args.seed, lambda row: print(row, flush=True), tuple(args.objects))
     rate = sum(succeeded(o) for _, _, o in table) / len(table)
     print(f"\n{sum(succeeded(o) for _, _, o in table)} of {len(table)} succeed ({rate:.0%}; required {SUCCESS_RATE:.0%})")
