@@ -67,7 +67,7 @@ OBJECTS: dict[str, Callable[[], trimesh.Trimesh]] = {
     "box_cube": lambda: trimesh.creation.box([0.15, 0.15, 0.15]),  # a 10 cm cube has room for one Allegro hand only
     "cylinder_tall": lambda: trimesh.creation.cylinder(radius=0.03, height=0.20, sections=48),
     "cylinder_squat": lambda: trimesh.creation.cylinder(radius=0.08, height=0.12, sections=48),
-    "torus": lambda: trimesh.creation.torus(major_radius=0.065, minor_radius=0.022, major_sections=48, minor_sections=20),
+    "torus": lambda: trimesh.creation.torus(major_radius=0.07, minor_radius=0.035, major_sections=48, minor_sections=20),  # a 7 cm thick ring: a 4 cm one lies too flat for fingertips kept 1 cm off the desk
     "mug": _mug,
     "dachshund": lambda: _animal(body=0.13, neck=(0.03, 0.05), leg=0.035, radius=0.025),
     "giraffe": lambda: _animal(body=0.09, neck=(0.05, 0.12), leg=0.08, radius=0.022),
