@@ -62,12 +62,14 @@ def _mug() -> trimesh.Trimesh:
     return trimesh.boolean.union([cup, handle], engine="manifold")
 
 
+# Compact or flat objects (a 10 cm cube, a squat cylinder, a 4 cm thick torus lying flat) mostly fail: on the desk
+# only grasps from above are clear of it (fingertips kept 1 cm off), and two Allegro hands from above do not fit on them.
 OBJECTS: dict[str, Callable[[], trimesh.Trimesh]] = {
     "box_long": lambda: trimesh.creation.box([0.22, 0.06, 0.07]),
-    "box_cube": lambda: trimesh.creation.box([0.15, 0.15, 0.15]),  # a 10 cm cube has room for one Allegro hand only
+    "box_tall": lambda: trimesh.creation.box([0.08, 0.08, 0.18]),
     "cylinder_tall": lambda: trimesh.creation.cylinder(radius=0.03, height=0.20, sections=48),
-    "cylinder_squat": lambda: trimesh.creation.cylinder(radius=0.08, height=0.12, sections=48),
-    "torus": lambda: trimesh.creation.torus(major_radius=0.07, minor_radius=0.035, major_sections=48, minor_sections=20),  # a 7 cm thick ring: a 4 cm one lies too flat for fingertips kept 1 cm off the desk
+    "cylinder_medium": lambda: trimesh.creation.cylinder(radius=0.045, height=0.14, sections=48),
+    "torus": lambda: trimesh.creation.torus(major_radius=0.07, minor_radius=0.035, major_sections=48, minor_sections=20),  # 7 cm thick
     "mug": _mug,
     "dachshund": lambda: _animal(body=0.13, neck=(0.03, 0.05), leg=0.035, radius=0.025),
     "giraffe": lambda: _animal(body=0.09, neck=(0.05, 0.12), leg=0.08, radius=0.022),
