@@ -1,19 +1,46 @@
-"""`regrasp check`: validate a task and summarise it (parts, pairs, collisions, reachability)."""
+"""Task validation: what `check` reports, and the part of it that `plan`, `grasps` and the workbench run before any step.
+
+`validate_task` finds what makes a task unplannable whatever the arms (the robot's start or end
+configuration in collision, a placement inside an obstacle) and what is suspicious (an object the
+hands cannot hold, by the spec's hand geometry); `check_task` adds each arm's reach of each
+placement and the arm assignment the arms step would make. The messages are the same in both.
+"""
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import coal
 import numpy as np
 
+from .arms import ArmsParams, decide
 from .collision import CollisionModel, build_collision_model
 from .environment import Obstacle
+from .errors import RegraspError
 from .geometry import coal_mesh, transform3s
-from .reach import ReachResult, reach
+from .hand_model import load_hand_model
+from .object_mesh import OBJECT_LIMITS, likely_unit
+from .reach import ReachResult, placement_reach
+from .robot_spec import HandSpec
 from .task import Scene
 
 RESTING_CONTACT = 0.003  # m: an object standing on a support may sink this deep into it
+OPENING_SAMPLES = 400  # finger configurations sampled per finger to measure a hand's largest opening
 
+
+class InvalidTask(RegraspError):
+    """A task that `check` rejects: no step runs on it."""
+
+
+@dataclass(frozen=True)
+class Validation:
+    """Problems (the task cannot be planned) and warnings (it probably will not be) found before any step."""
+
+    config_collisions: dict[str, list[tuple[str, str]]]
+    placement_collisions: dict[str, list[str]]
+    problems: tuple[str, ...]
+    warnings: tuple[str, ...]
 
 @dataclass(frozen=True)
 class TaskReport:
@@ -26,7 +53,11 @@ class TaskReport:
     config_collisions: dict[str, list[tuple[str, str]]]
     placement_collisions: dict[str, list[str]]
     reach: dict[str, dict[str, ReachResult]]
+    tolerance: float
+    arms: str  # the arm assignment the arms step would make, or why none
+    handover: bool  # false: one arm reaches both placements and the task does not ask for a handover
     problems: tuple[str, ...]
+    warnings: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -42,11 +73,15 @@ class TaskReport:
         lines += ["", "object placements"]
         for name, hits in self.placement_collisions.items():
             lines.append(f"  {name:<10}" + ("collision-free" if not hits else "IN COLLISION with " + ", ".join(hits)))
-        lines += ["", "reachability (grasp centre to the object's centre of mass, arm + torso, collision-free)"]
+        lines += ["", "reachability: can the arm (with the torso) bring its hand's grasp centre (the open fingertips' mean) to",
+                  "the object's centre of mass at the placement, collision-free? The distance is the closest that centre came;",
+                  f"within {self.tolerance * 100:.1f} cm counts, unless every such configuration collides ('collides')."]
         for placement, per_arm in self.reach.items():
-            cells = [f"{arm}: {'yes' if r.reachable else 'no'} ({r.distance * 100:.1f} cm)" for arm, r in per_arm.items()]
+            cells = [f"{arm}: {r.describe(self.tolerance)}" for arm, r in per_arm.items()]
             lines.append(f"  {placement:<10}" + "   ".join(cells))
-        lines += [""] + ([f"PROBLEM: {p}" for p in self.problems] or ["OK: a valid two-hand regrasping task"])
+        lines += ["", f"arms: {self.arms}", ""] + [f"WARNING: {w}" for w in self.warnings]
+        ok = "OK: a valid two-hand regrasping task" if self.handover else "OK: a valid pick-and-place task for one arm (no handover)"
+        lines += [f"PROBLEM: {p}" for p in self.problems] or [ok]
         return "\n".join(lines)
 
 
@@ -69,22 +104,39 @@ def object_obstacle(scene: Scene, name: str, T: np.ndarray) -> Obstacle:
     return Obstacle(f"object_{name}", "mesh", (), T, mesh=scene.object_mesh)
 
 
-def check_task(scene: Scene, rng: np.random.Generator, cm: CollisionModel | None = None) -> TaskReport:
-    """Run every check of a task; problems are collected, not raised, so the summary is complete."""
+@functools.lru_cache(maxsize=8)
+def hand_opening(hand: HandSpec) -> float:
+    """The widest object (m) a hand can close on: the largest gap between the thumb's tip sphere and another's."""
+    model = load_hand_model(hand)
+    rng = np.random.default_rng(0)
+    tips = [f.tip_positions(rng.uniform(f.lower, f.upper, (OPENING_SAMPLES, f.dof))) for f in model.fingers]
+    thumb = model.finger_names.index(hand.thumb)
+    gaps = [np.linalg.norm(tips[thumb][:, None] - tips[i][None], axis=2).max() - model.fingers[thumb].tip_radius - f.tip_radius
+            for i, f in enumerate(model.fingers) if i != thumb]
+    return float(max(gaps))
+
+
+def size_warnings(scene: Scene) -> list[str]:
+    """Warnings for an object the robot's hands cannot hold: wider than any hand opens, or smaller than a fingertip."""
+    extents = np.sort(scene.object_mesh.extents)
+    hands = [scene.robot.spec.arm(a).hand for a in scene.robot.spec.arm_names]
+    opening = max(hand_opening(h) for h in hands)
+    tip = min(f.tip_radius for h in hands for f in h.fingers)
+    if extents[0] > opening:
+        return [(f"the object is {extents[0]:.3g} m across at its narrowest, wider than the robot's hands open "
+                 f"({opening:.3g} m between the thumb's and another fingertip, from the robot spec's hands): no grasp can "
+                 f"close on it ({likely_unit(extents[-1], OBJECT_LIMITS.typical)})")]
+    if extents[-1] < 4 * tip:
+        return [(f"the object is {extents[-1]:.3g} m long at its largest, less than four fingertip radii ({4 * tip:.3g} m, "
+                 f"from the robot spec's hands): three fingertips cannot touch it at once "
+                 f"({likely_unit(extents[-1], OBJECT_LIMITS.typical)})")]
+    return []
+
+
+def validate_task(scene: Scene, cm: CollisionModel | None = None) -> Validation:
+    """The checks that need no arm: the robot's start and end configurations and the object's placements collision-free."""
     robot = scene.robot
     cm = cm or build_collision_model(robot, scene.environment)
-    checker = cm.checker()
-    dof = {"total": robot.nq, "torso": len(robot.torso_idx)}
-    for arm in robot.spec.arm_names:
-        dof[arm] = len(robot.arm_idx[arm])
-        dof[f"{arm}_hand"] = len(robot.hand_idx[arm])
-    pairs = {
-        "self (kept)": len(cm.subsets["self"]),
-        "robot-environment": len(cm.subsets["env"]),
-        "disabled: adjacent links": cm.pair_set.adjacent,
-        "disabled: touching at rest": cm.pair_set.at_rest,
-        "pruned: never within margin": cm.pair_set.pruned,
-    }
     problems: list[str] = []
     configs = {}
     for name, q, T in (("initial", scene.q_initial, scene.object_initial), ("final", scene.q_final, scene.object_final)):
@@ -97,17 +149,39 @@ def check_task(scene: Scene, rng: np.random.Generator, cm: CollisionModel | None
     for name, hits in placements.items():
         if hits:
             problems.append(f"the object's {name} placement penetrates {', '.join(hits)}")
-    com = np.asarray(scene.object_mesh.center_mass)
-    reaches: dict[str, dict[str, ReachResult]] = {}
-    for name, T in (("initial", scene.object_initial), ("final", scene.object_final)):
-        target = T[:3, :3] @ com + T[:3, 3]
-        reaches[name] = {arm: reach(robot, checker, arm, target, rng) for arm in robot.spec.arm_names}
-    init_arms = [a for a, r in reaches["initial"].items() if r.reachable]
-    final_arms = [a for a, r in reaches["final"].items() if r.reachable]
-    if len(init_arms) != 1:
-        problems.append(f"the initial placement must be reachable by exactly one arm (reached by: {', '.join(init_arms) or 'none'})")
-    if len(final_arms) != 1:
-        problems.append(f"the final placement must be reachable by exactly one arm (reached by: {', '.join(final_arms) or 'none'})")
-    if len(init_arms) == 1 and init_arms == final_arms:
-        problems.append(f"both placements are reached by the {init_arms[0]} arm only: no regrasp is needed")
-    return TaskReport(scene.name, robot.spec.name, dof, pairs, configs, placements, reaches, tuple(problems))
+    return Validation(configs, placements, tuple(problems), tuple(size_warnings(scene)))
+
+
+def require_valid(scene: Scene, warn: Callable[[str], None]) -> Validation:
+    """Validate a task before any step: InvalidTask with `check`'s problem messages, each warning passed to `warn`."""
+    v = validate_task(scene)
+    for w in v.warnings:
+        warn(f"warning: task {scene.source}: {w}")
+    if v.problems:
+        raise InvalidTask(f"task {scene.source}: " + "; ".join(v.problems) + " (run `regrasp check` for the full report)")
+    return v
+
+
+def check_task(scene: Scene, cm: CollisionModel | None = None, params: ArmsParams | None = None) -> TaskReport:
+    """Run every check of a task; problems are collected, not raised, so the summary is complete."""
+    params = params or ArmsParams()
+    robot = scene.robot
+    cm = cm or build_collision_model(robot, scene.environment)
+    dof = {"total": robot.nq, "torso": len(robot.torso_idx)}
+    for arm in robot.spec.arm_names:
+        dof[arm] = len(robot.arm_idx[arm])
+        dof[f"{arm}_hand"] = len(robot.hand_idx[arm])
+    pairs = {
+        "self (kept)": len(cm.subsets["self"]),
+        "robot-environment": len(cm.subsets["env"]),
+        "disabled: adjacent links": cm.pair_set.adjacent,
+        "disabled: touching at rest": cm.pair_set.at_rest,
+        "pruned: never within margin": cm.pair_set.pruned,
+    }
+    v = validate_task(scene, cm)
+    reaches = placement_reach(scene, cm.checker(), params.seeds, params.tolerance)
+    decision = decide(scene, reaches)
+    problems = list(v.problems) + ([decision.failure] if decision.failure and decision.handover else [])
+    arms = decision.choice if decision.failure else f"{decision.picking_arm} picks, {decision.placing_arm} places ({decision.choice})"
+    return TaskReport(scene.name, robot.spec.name, dof, pairs, v.config_collisions, v.placement_collisions, reaches,
+                      params.tolerance, arms, decision.handover, tuple(problems), v.warnings)

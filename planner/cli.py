@@ -9,8 +9,6 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from .errors import RegraspError
 from .paths import DEFAULT_TASK
 
@@ -32,7 +30,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from .task import load_task
 
     print(f"loading {args.task} ...", file=sys.stderr)
-    report = check_task(load_task(args.task), np.random.default_rng(args.seed))
+    report = check_task(load_task(args.task))
     print(report.render())
     return 0 if report.ok else 1
 
@@ -85,6 +83,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from .check import require_valid
     from .pipeline import step_named
     from .runner import run_pipeline
     from .session import Session
@@ -97,11 +96,20 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         step, name, value = parse_assignment(text)
         params.setdefault(step, {})[name] = value
     out = Path(args.out)
+    warned: set[str] = set()
+
+    def warn(message: str) -> None:
+        if message not in warned:  # the task is validated before the session is made, and again before the steps
+            warned.add(message)
+            print(message, file=sys.stderr)
+
     if args.resume and Session.exists(out):
         session = Session.open(out)
         print(f"resuming {out}: finished {', '.join(session.finished()) or 'nothing yet'}", file=sys.stderr)
     else:
-        session = Session.create(out, load_task(args.task), args.seed, force=args.force)
+        scene = load_task(args.task)
+        require_valid(scene, warn)  # no session folder for a task `check` rejects
+        session = Session.create(out, scene, args.seed, force=args.force)
 
     def progress(step):
         bar = tqdm(total=100, desc=f"{step.name:<14}", unit="%", leave=True, file=sys.stderr,
@@ -117,7 +125,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
     failed = None
     try:
-        ran = run_pipeline(session, args.until, params, progress)
+        ran = run_pipeline(session, args.until, params, progress, warn)
     except StepFailed as exc:
         ran, failed = [r["name"] for r in session.records], exc
     print(f"{'step':<16}{'seconds':>9}  key figures")
@@ -189,7 +197,7 @@ def _cmd_grasps(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from .grasps import GraspParams, grasp_list
+    from .grasps import GraspParams, grasp_list, session_grasp_seed
 
     robot_spec, mesh, what = _grasp_inputs(args)
     params = GraspParams()
@@ -202,7 +210,7 @@ def _cmd_grasps(args: argparse.Namespace) -> int:
         bar.set_postfix_str(message, refresh=False)
         bar.refresh()
 
-    result, cached = grasp_list(robot_spec, args.hand, mesh, params, args.seed, progress, use_cache=not args.no_cache)
+    result, cached = grasp_list(robot_spec, args.hand, mesh, params, session_grasp_seed(args.seed), progress, use_cache=not args.no_cache)
     bar.close()
     s = result.stats()
     rows = [("frames tried", s["frames"], ""), ("contacts found", s["contacts_found"], "grasps with >= 3 contacts"),
@@ -212,11 +220,15 @@ def _cmd_grasps(args: argparse.Namespace) -> int:
     print("\n".join(f"  {name:<15} {value!s:>8}  {note}".rstrip() for name, value, note in rows))
     if args.json:
         _write_json(Path(args.json), result.to_json())
+    if result.failure:
+        print(f"error: {result.failure}", file=sys.stderr)
+        return 1
     return 0
 
 
 def _grasp_inputs(args: argparse.Namespace) -> tuple[RobotSpec, trimesh.Trimesh, str]:
     """The robot spec, the object mesh and a label, from --task or from --robot and --object."""
+    from .check import require_valid
     from .object_mesh import load_object_mesh
     from .robot_spec import load_robot_spec
     from .task import BUILTIN_OBJECTS, load_task
@@ -227,6 +239,7 @@ def _grasp_inputs(args: argparse.Namespace) -> tuple[RobotSpec, trimesh.Trimesh,
         mesh_path = BUILTIN_OBJECTS.get(args.object, Path(args.object))
         return load_robot_spec(args.robot), load_object_mesh(mesh_path), f"{mesh_path.name} ({args.robot})"
     scene = load_task(args.task or DEFAULT_TASK)
+    require_valid(scene, lambda message: print(message, file=sys.stderr))
     return scene.robot.spec, scene.object_mesh, f"{scene.object_name} (task {scene.name})"
 
 
@@ -246,7 +259,7 @@ def parser() -> argparse.ArgumentParser:
     w.set_defaults(func=_cmd_workbench)
     c = sub.add_parser("check", help="validate a task file and print a summary")
     c.add_argument("task", help="task file, or a name in assets/tasks")
-    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--seed", type=int, default=0, help="unused: reachability is tried from fixed starts, as the arms step does")
     c.set_defaults(func=_cmd_check)
     pl = sub.add_parser("plan", help="run the pipeline headless into a session folder")
     pl.add_argument("task", help="task file, or a name in assets/tasks")
@@ -280,7 +293,7 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--object", help="object mesh file, or 'statuette' (with --robot)")
     g.add_argument("--hand", required=True, help="the arm whose hand grasps, e.g. right or left")
     g.add_argument("--frames", type=int, help="about this many grasp frames (positions x orientations)")
-    g.add_argument("--seed", type=int, default=0, help="turns the orientation grid and shifts the position grid")
+    g.add_argument("--seed", type=int, default=0, help="session seed: the list `plan --seed` computes (and caches) for the hand")
     g.add_argument("--no-cache", action="store_true", help="recompute even when a cached list exists")
     g.add_argument("--json", help="also write the list to this JSON file")
     g.set_defaults(func=_cmd_grasps)

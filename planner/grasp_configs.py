@@ -5,7 +5,11 @@ picking hand at the initial pose, the placing hand at the final one): a hand tha
 can never execute that grasp. For every remaining grasp, whole-robot configurations are sampled:
 the torso and the free arm near rest, the grasping arm (with the torso) by IK onto the grasp's palm
 pose, its fingers at the grasp; each is checked against self-collision, the environment and the
-object at its placement. The best-scored configuration of each grasp is kept (see config_score.py).
+object at its placement. A grasp for which none of these `attempts` succeeds gets `wide_attempts`
+more, the torso and the free arm drawn over their whole ranges (a placement at the edge of the
+workspace needs the spine bent or the other arm out of the way). The best-scored configuration of
+each grasp is kept (see config_score.py). Budgets: at most (attempts + wide_attempts) IK solves of
+ik_iterations iterations per grasp clear of the environment.
 """
 from __future__ import annotations
 
@@ -15,13 +19,13 @@ import numpy as np
 
 from .arm_ik import ArmIK
 from .config_score import ConfigScorer, ScoreWeights
+from .forked import forked_map
 from .grasps import GraspList
 from .hand_model import load_hand_model
 from .hand_placement import ObstacleTest, posed_shapes
 from .object_collision import ObjectCollision
 from .results import array
 from .robot import Robot
-from .forked import forked_map
 from .stages import StageLog
 from .steps import Step, StepContext
 from .task import Scene
@@ -29,7 +33,8 @@ from .task import Scene
 
 @dataclass(frozen=True)
 class GraspConfigParams:
-    attempts: int = 6  # body samples (IK starts) tried per grasp
+    attempts: int = 8  # body samples (IK starts) tried per grasp with the torso and the free arm near rest
+    wide_attempts: int = 16  # more starts, torso and free arm over their whole ranges, for a grasp the first ones miss
     keep: int = 2  # a grasp stops after this many collision-free configurations; its best-scored one is kept
     torso_sigma: float = 0.1  # rad: torso joints sampled around rest
     free_arm_sigma: float = 0.1  # rad: the free arm's joints sampled around rest
@@ -105,15 +110,13 @@ class ConfigSampler:
         self.ik = {a: ArmIK(robot, a) for a in robot.spec.arm_names}
         self.both = ArmIK(robot, tuple(robot.spec.arm_names))
 
-    def body(self, rng: np.random.Generator, free_arms: list[str]) -> np.ndarray:
-        """q_rest with the torso and the free arms sampled around rest (Gaussian, clipped to the limits)."""
+    def body(self, rng: np.random.Generator, free_arms: list[str], wide: bool = False) -> np.ndarray:
+        """q_rest with the torso and the free arms sampled around rest (Gaussian, clipped to the limits), or
+        uniformly over their ranges when `wide`."""
         robot, p = self.robot, self.p
         q = robot.q_rest.copy()
-        t = robot.torso_idx
-        q[t] = robot.q_rest[t] + rng.normal(0.0, p.torso_sigma, len(t))
-        for arm in free_arms:
-            i = robot.arm_idx[arm]
-            q[i] = robot.q_rest[i] + rng.normal(0.0, p.free_arm_sigma, len(i))
+        for idx, sigma in [(robot.torso_idx, p.torso_sigma)] + [(robot.arm_idx[a], p.free_arm_sigma) for a in free_arms]:
+            q[idx] = rng.uniform(robot.lower[idx], robot.upper[idx]) if wide else robot.q_rest[idx] + rng.normal(0.0, sigma, len(idx))
         return robot.clip(q)
 
     def reach(self, hands: dict[str, tuple[np.ndarray, np.ndarray]], q: np.ndarray) -> np.ndarray | None:
@@ -138,8 +141,11 @@ class ConfigSampler:
         com = object_pose[:3, :3] @ np.asarray(self.collision.com) + object_pose[:3, 3]
         best, found = None, 0
         idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
-        for attempt in range(p.attempts):
-            q = self.body(rng, free)
+        for attempt in range(p.attempts + p.wide_attempts):
+            wide = attempt >= p.attempts
+            if wide and best is not None:
+                break  # the wide starts are for grasps the near-rest ones missed
+            q = self.body(rng, free, wide)
             if attempt == 0:
                 q[idx] = start[idx]
             elif attempt > 1:

@@ -28,7 +28,7 @@ from .hand_model import HandModel, load_hand_model
 from .object_model import ObjectModel, mesh_bytes, object_model
 from .results import array, load_result, save_result, writing
 from .robot_spec import HandSpec, RobotSpec
-from .steps import Progress, Step, StepContext, no_progress
+from .steps import Progress, Step, StepContext, no_progress, step_seed
 from .user_cache import cache_key, cache_path, read_cached
 
 CODE_VERSION = "grasps-1"
@@ -106,10 +106,20 @@ class GraspList:
         """Frames whose grasp reached three contacts (force-closed or not)."""
         return self.outcomes.get("not_closed", 0) + self.outcomes.get("closed", 0)
 
+    @property
+    def failure(self) -> str:
+        """Empty when the list holds a grasp; else the grasp step's failure, with the count at every stage."""
+        if self.kept:
+            return ""
+        return (f"no force-closed grasp of the {self.hand} hand on the object (frames tried: {self.frames_tried}; "
+                f"contacts found: {self.contacts_found}; force-closed: {self.outcomes.get('closed', 0)}); "
+                "is the object the size the hand holds (see `regrasp check`)?")
+
     def stats(self) -> dict:
         return {"hand": self.hand, "frames": self.frames_tried, "contacts_found": self.contacts_found,
                 "force_closed": self.outcomes.get("closed", 0), "kept": self.kept,
-                "best_quality": round(float(self.quality[0]), 4) if len(self) else None, "seconds": round(self.seconds, 2)}
+                "best_quality": round(float(self.quality[0]), 4) if len(self) else None, "seconds": round(self.seconds, 2),
+                **({"failure": self.failure} if self.failure else {})}
 
     def contacts(self, rank: int) -> list[dict]:
         """The contacts of the grasp at a rank: finger name, point and outward normal (object frame)."""
@@ -238,15 +248,27 @@ def grasp_list(spec: RobotSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams,
     return result, False
 
 
+SEED_NAME = "grasps"  # both grasp steps derive their seed from this name: a hand's list depends on the hand, not its role
+
+
+def seed_of(rng: np.random.Generator) -> int:
+    """A grasp list's seed, drawn from the step's generator (so the session seed decides it)."""
+    return int(rng.integers(2**31))
+
+
+def session_grasp_seed(session_seed: int) -> int:
+    """The seed a session with this seed computes its grasp lists with: `regrasp grasps --seed S` shares `plan --seed S`'s."""
+    return seed_of(np.random.default_rng(step_seed(session_seed, SEED_NAME)))
+
+
 def _step_run(role: str) -> Any:
     def run(ctx: StepContext) -> GraspList:
         arm = getattr(ctx.inputs["arms"], f"{role}_arm")
-        seed = int(ctx.rng.integers(2**31))
-        return grasp_list(ctx.scene.robot.spec, arm, ctx.scene.object_mesh, ctx.params, seed, ctx.progress)[0]
+        return grasp_list(ctx.scene.robot.spec, arm, ctx.scene.object_mesh, ctx.params, seed_of(ctx.rng), ctx.progress)[0]
 
     run.__doc__ = f"The {role} hand's grasp list (paper IV-A)."
     return run
 
 
-PICK_STEP = Step("pick_grasps", "grasp list of the picking hand", ("arms",), GraspParams, GraspList, _step_run("picking"))
-PLACE_STEP = Step("place_grasps", "grasp list of the placing hand", ("arms",), GraspParams, GraspList, _step_run("placing"))
+PICK_STEP = Step("pick_grasps", "grasp list of the picking hand", ("arms",), GraspParams, GraspList, _step_run("picking"), SEED_NAME)
+PLACE_STEP = Step("place_grasps", "grasp list of the placing hand", ("arms",), GraspParams, GraspList, _step_run("placing"), SEED_NAME)

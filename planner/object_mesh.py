@@ -1,4 +1,5 @@
-"""Loading a user's object mesh (metres): checked, repaired, and rejected with an InputError the user can act on."""
+"""Loading a user's mesh (an object or an obstacle): checked, repaired, scaled, turned upright, and rejected with an
+InputError the user can act on (the defect named: holes, non-manifold edges, inconsistent winding, size and unit)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,9 +11,46 @@ import trimesh
 from .errors import InputError
 
 FORMATS = {".obj": "obj", ".stl": "stl", ".ply": "ply", ".off": "off", ".glb": "glb"}
-MIN_EXTENT = 0.01  # m: smaller than 1 cm is not something two hands regrasp
-MAX_EXTENT = 2.0  # m
 MAX_FACES = 200_000
+# Which axis of a mesh file points up; the rotation turning that axis to +z (world up). glTF meshes are y-up.
+UP_AXES = {
+    "z": np.eye(3),
+    "y": np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]),  # +90 deg about x: y -> z
+    "x": np.array([[0.0, 0, -1], [0, 1, 0], [1, 0, 0]]),  # -90 deg about y: x -> z
+    "-z": np.diag([1.0, -1.0, -1.0]),  # 180 deg about x
+    "-y": np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]),  # -90 deg about x: -y -> z
+    "-x": np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]),  # +90 deg about y: -x -> z
+}
+# Length units a mesh is often exported in, by their size in metres: the likely unit of a mesh of the wrong size.
+UNITS = {"millimetres": 0.001, "centimetres": 0.01, "inches": 0.0254, "decimetres": 0.1}
+
+
+@dataclass(frozen=True)
+class SizeLimits:
+    """The accepted largest extent (m) of a kind of mesh, and a typical size used to guess a wrong unit."""
+
+    what: str  # "object" or "obstacle", for messages
+    low: float
+    high: float
+    typical: float
+
+
+OBJECT_LIMITS = SizeLimits("object", 0.01, 2.0, 0.2)  # below 1 cm nothing is regrasped by two hands; above 2 m not carried
+OBSTACLE_LIMITS = SizeLimits("obstacle", 0.001, 50.0, 1.0)  # a screw to a room
+
+
+@dataclass(frozen=True)
+class MeshOptions:
+    """How a task places a mesh file in metres and z-up: a uniform scale (e.g. 0.001 for millimetres) and its up axis."""
+
+    scale: float = 1.0
+    up: str = "z"
+
+    def transform(self) -> np.ndarray:
+        """The 4x4 applied to the file's coordinates."""
+        T = np.eye(4)
+        T[:3, :3] = self.scale * UP_AXES[self.up]
+        return T
 
 
 @dataclass(frozen=True)
@@ -48,36 +86,81 @@ def _read(path: Path, file_type: str) -> trimesh.Trimesh:
                                      "expected a valid mesh file") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         if not path.read_bytes().strip():
-            raise InputError(path, None, "is empty (the file holds no data); expected a closed triangle mesh of the object")
+            raise InputError(path, None, "is empty (the file holds no data); expected a closed triangle mesh")
         raise InputError(path, None, f"could not be parsed as a {file_type.upper()} mesh: no triangles were found in it "
                                      "(is it corrupt, truncated, only points/lines, or another format?); "
-                                     "expected a closed triangle mesh of the object")
+                                     "expected a closed triangle mesh")
     return loaded
 
 
 def _repair(mesh: trimesh.Trimesh) -> None:
-    """Merge duplicate vertices, drop degenerate and duplicate faces, fill small holes, fix winding and normals."""
-    mesh.merge_vertices()
+    """Merge vertices by position alone (seams of UVs and normals split them), drop degenerate and duplicate faces,
+    fill holes, fix winding and normals."""
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
     mesh.update_faces(mesh.nondegenerate_faces())
     mesh.update_faces(mesh.unique_faces())
     mesh.remove_unreferenced_vertices()
     trimesh.repair.fix_normals(mesh)
-    trimesh.repair.fill_holes(mesh)
-    trimesh.repair.fix_normals(mesh)
+    if not mesh.is_watertight:
+        trimesh.repair.fill_holes(mesh)
+        trimesh.repair.fix_normals(mesh)
 
 
-def load_object_mesh(path: str | Path) -> trimesh.Trimesh:
-    """Load an OBJ/STL/PLY/OFF/GLB object (metres) as one repaired, closed, hand-sized triangle mesh."""
-    path = Path(path)
+def edge_defects(mesh: trimesh.Trimesh) -> tuple[int, int]:
+    """(open edges: used by one triangle, non-manifold edges: used by more than two) of a mesh with merged vertices."""
+    _, counts = np.unique(mesh.edges_sorted, axis=0, return_counts=True)
+    return int(np.sum(counts == 1)), int(np.sum(counts > 2))
+
+
+def defect(mesh: trimesh.Trimesh) -> str:
+    """What keeps a repaired mesh from being a closed volume, in words; empty when it is one."""
+    open_edges, non_manifold = edge_defects(mesh)
+    problems = []
+    if non_manifold:
+        problems.append(f"{non_manifold} non-manifold edges (edges shared by more than two triangles)")
+    if open_edges:
+        problems.append(f"holes that could not be filled, so it is not watertight ({open_edges} open edges, "
+                        "each used by one triangle only)")
+    if not problems and not mesh.is_winding_consistent:
+        problems.append("inconsistent winding (neighbouring triangles face opposite ways)")
+    if not problems and not mesh.is_watertight:
+        problems.append("open edges (it is not watertight)")
+    if problems:
+        return "it has " + " and ".join(problems)
+    volume = float(mesh.volume)
+    return "" if volume > 0 else f"it encloses no volume (volume {volume:.3g} m^3)"
+
+
+def likely_unit(size: float, typical: float) -> str:
+    """A hint naming the unit a mesh of this largest extent (m) was probably exported in, if it should be about
+    `typical`, with the task's `scale` to set."""
+    if size > typical:
+        unit, metres = min(UNITS.items(), key=lambda u: abs(np.log(size * u[1] / typical)))
+        return f"is it in {unit}? then set scale = {metres:g} for this mesh in the task file, or export it in metres"
+    factor = 10.0 ** round(np.log10(typical / size))
+    return (f"is it in the wrong unit or scaled down? set scale (e.g. scale = {factor:g}) for this mesh in the task file, "
+            "or export it in metres")
+
+
+def _checked_path(path: Path) -> str:
+    """The trimesh file type of a mesh path, or an InputError saying what is wrong with the path."""
+    if path.is_dir():
+        raise InputError(path, None, "is a directory; expected a mesh file (.obj, .stl, .ply, .off or .glb)")
     if not path.is_file():
-        raise InputError(path, None, "no such file; expected an object mesh (.obj, .stl, .ply, .off or .glb)")
+        raise InputError(path, None, "no such file; expected a mesh file (.obj, .stl, .ply, .off or .glb)")
     file_type = FORMATS.get(path.suffix.lower())
     if file_type is None:
         raise InputError(path, None, f"unsupported mesh format '{path.suffix or '(no extension)'}'; "
                                      "expected one of .obj, .stl, .ply, .off, .glb")
     if path.stat().st_size == 0:
-        raise InputError(path, None, "is empty (0 bytes); expected a closed triangle mesh of the object")
-    mesh = _read(path, file_type)
+        raise InputError(path, None, "is empty (0 bytes); expected a closed triangle mesh")
+    return file_type
+
+
+def load_mesh(path: str | Path, limits: SizeLimits = OBJECT_LIMITS, options: MeshOptions = MeshOptions()) -> trimesh.Trimesh:
+    """Load an OBJ/STL/PLY/OFF/GLB file as one repaired, closed triangle mesh in metres and z-up, within `limits`."""
+    path = Path(path)
+    mesh = _read(path, _checked_path(path))
     if len(mesh.faces) > MAX_FACES:
         raise InputError(path, None, f"has {len(mesh.faces):,} triangles, more than the {MAX_FACES:,} allowed; "
                                      "simplify (decimate) the mesh first")
@@ -86,20 +169,23 @@ def load_object_mesh(path: str | Path) -> trimesh.Trimesh:
     try:
         with np.errstate(all="ignore"):  # a flat or open mesh divides by a zero volume in trimesh
             _repair(mesh)
-            watertight, volume = mesh.is_watertight, float(mesh.volume)
-    except Exception as exc:
+            problem = defect(mesh) if len(mesh.faces) else ""
+    except Exception as exc:  # a library failure inside the repair: name it, never a traceback
         raise InputError(path, None, f"could not be repaired into a closed mesh ({type(exc).__name__}: {exc})") from exc
     if len(mesh.faces) == 0:
         raise InputError(path, None, "is empty: all its triangles are degenerate; expected a closed triangle mesh")
+    mesh.apply_transform(options.transform())
     size = float(mesh.extents.max())
-    if size < MIN_EXTENT or size > MAX_EXTENT:
-        hint = ("is it in millimetres or centimetres? export it in metres"
-                if size > MAX_EXTENT else "is it in the wrong unit (e.g. kilometres) or scaled down? export it in metres")
-        raise InputError(path, None, f"has an absurd size: its largest extent is {size:.6g} m, expected between "
-                                     f"{MIN_EXTENT} m and {MAX_EXTENT} m ({hint})")
-    if not watertight or volume <= 0:
-        problem = "is not watertight (it has holes or open edges)" if not watertight else \
-            f"encloses no volume (volume {volume:.3g} m^3)"
-        raise InputError(path, None, f"is not a closed volume after repair: it {problem}; "
-                                     "expected a closed, watertight surface around a solid object")
+    if size < limits.low or size > limits.high:
+        shown = f" (after scale = {options.scale:g})" if options.scale != 1.0 else ""
+        raise InputError(path, None, f"has an absurd size for an {limits.what}: its largest extent is {size:.6g} m{shown}, "
+                                     f"expected between {limits.low:g} m and {limits.high:g} m ({likely_unit(size, limits.typical)})")
+    if problem:
+        raise InputError(path, None, f"is not a closed volume after repair: {problem}; "
+                                     "expected a closed, watertight surface around a solid")
     return mesh
+
+
+def load_object_mesh(path: str | Path, options: MeshOptions = MeshOptions()) -> trimesh.Trimesh:
+    """Load an object mesh (metres unless `options` scale it) as one repaired, closed, hand-sized triangle mesh."""
+    return load_mesh(path, OBJECT_LIMITS, options)

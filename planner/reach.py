@@ -2,8 +2,10 @@
 
 The grasp centre is the mean of the fingertips at the hand's open configuration, in the palm
 frame: where an object sits when the hand closes on it. Position-only damped least squares from
-several seeds; a solution counts only if it respects joint limits and the arm and hand collide
-with nothing (the manipulated object itself is not in the collision model).
+several seeds; a solution counts only if it respects joint limits and the arm and the palm collide
+with nothing (the manipulated object itself is not in the collision model). The fingers are left
+out: open, they reach past the grasp centre into the support of a low object, and they close on
+the object anyway; each grasp's fingers are checked with its configuration (grasp_configs.py).
 """
 from __future__ import annotations
 
@@ -13,15 +15,31 @@ import numpy as np
 import pinocchio as pin
 
 from .collision import CollisionChecker
-from .robot import Robot
+from .robot import Robot, joint_at
+from .steps import Progress, no_progress
+from .task import Scene
+
+REACH_SEED = 0  # reachability is a property of the task: `check` and the arms step draw the same starts
 
 
 @dataclass(frozen=True)
 class ReachResult:
+    """Whether an arm brings its grasp centre to a target, how close it came, and the configuration that did."""
+
     arm: str
     reachable: bool
-    distance: float  # m: best distance of the grasp centre to the target over all seeds
+    distance: float  # m: the grasp centre to the target, at q
     q: np.ndarray  # when reachable a collision-free configuration achieving it, else the closest one found
+    closest_collides: bool = False  # not reachable although a start came within tolerance: every such one collides
+
+    def describe(self, tolerance: float) -> str:
+        """'yes (0.3 cm)', 'no: 12.5 cm short' or 'no: collides (0.1 cm)', for reports."""
+        cm = f"{self.distance * 100:.1f} cm"
+        if self.reachable:
+            return f"yes ({cm})"
+        if self.closest_collides:
+            return f"no: collides ({cm})"
+        return f"no: {cm} short" if self.distance > tolerance else f"no ({cm})"
 
 
 def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
@@ -61,13 +79,20 @@ def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, o
     return q
 
 
+def finger_geometries(robot: Robot, checker: CollisionChecker, arm: str) -> frozenset[str]:
+    """Names of the collision geometries the fingers of an arm's hand carry."""
+    joints = {joint_at(robot.model, int(i)) for i in robot.hand_idx[arm]}
+    return frozenset(o.name for o in checker.cm.geometry.geometryObjects if o.parentJoint in joints)
+
+
 def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray, rng: np.random.Generator,
           seeds: int = 32, tolerance: float = 0.02) -> ReachResult:
     """Try `seeds` starts (rest first, then random torso+arm); reachable if one ends within tolerance, collision-free."""
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
     offset = grasp_centre(robot, arm)
     data = robot.model.createData()
-    best, closest = np.inf, robot.q_rest
+    fingers = finger_geometries(robot, checker, arm)
+    best, closest, collided = np.inf, robot.q_rest, False
     for s in range(seeds):
         q0 = robot.q_rest.copy()
         if s:
@@ -77,6 +102,24 @@ def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray,
         d = float(np.linalg.norm(centre - target))
         if d < best:
             best, closest = d, q
-        if d <= tolerance and not checker.in_collision(q, arm):
-            return ReachResult(arm, True, d, q)
-    return ReachResult(arm, False, best, closest)
+        if d <= tolerance:
+            if not checker.in_collision(q, arm) or not any(fingers.isdisjoint(pair) for pair in checker.colliding_pairs(q, arm)):
+                return ReachResult(arm, True, d, q)
+            collided = True
+    return ReachResult(arm, False, best, closest, collided)
+
+
+def placement_reach(scene: Scene, checker: CollisionChecker, seeds: int = 32, tolerance: float = 0.02,
+                    progress: Progress = no_progress) -> dict[str, dict[str, ReachResult]]:
+    """placement ('initial', 'final') -> arm -> whether it reaches the object's centre of mass there (fixed starts)."""
+    robot = scene.robot
+    com = np.asarray(scene.object_mesh.center_mass)
+    arms = robot.spec.arm_names
+    out: dict[str, dict[str, ReachResult]] = {}
+    for i, (name, T) in enumerate((("initial", scene.object_initial), ("final", scene.object_final))):
+        target = T[:3, :3] @ com + T[:3, 3]
+        out[name] = {}
+        for j, arm in enumerate(arms):
+            progress((i * len(arms) + j) / (2 * len(arms)), f"{arm} arm to the {name} placement")
+            out[name][arm] = reach(robot, checker, arm, target, np.random.default_rng([REACH_SEED, i, j]), seeds, tolerance)
+    return out

@@ -1,15 +1,17 @@
 """Running the pipeline into a session: the next step, or every step up to a named one."""
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
+from .check import require_valid
 from .pipeline import steps_until
 from .session import Session
-from .steps import Progress, Step, StepContext, StepFailed, no_progress, step_seed
+from .steps import Progress, Step, StepContext, StepFailed, no_progress
 
 ProgressFactory = Callable[[Step], Progress]
 
@@ -17,7 +19,7 @@ ProgressFactory = Callable[[Step], Progress]
 def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = None, progress: Progress = no_progress) -> Any:
     """Run one step on the session's scene and earlier results, and record it; StepFailed if its result reports a failure."""
     p = step.make_params(params)
-    seed = step_seed(session.seed, step.name)
+    seed = step.seed(session.seed)
     inputs = {name: session.result(name) for name in step.needs}
     ctx = StepContext(session.scene, inputs, p, np.random.default_rng(seed), progress)
     start = time.perf_counter()
@@ -28,9 +30,17 @@ def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = No
     return result
 
 
+def warn_on_stderr(message: str) -> None:
+    """Print a warning about the task for the person running the pipeline."""
+    print(message, file=sys.stderr)
+
+
 def run_pipeline(session: Session, until: str | None = None, params: Mapping[str, Mapping[str, Any]] | None = None,
-                 progress: ProgressFactory | None = None) -> list[str]:
-    """Run, in order, every step up to `until` that the session has not finished; returns their names."""
+                 progress: ProgressFactory | None = None, warn: Callable[[str], None] = warn_on_stderr) -> list[str]:
+    """Run, in order, every step up to `until` that the session has not finished; returns their names.
+
+    The task is validated first, as `regrasp check` does (InvalidTask, before any step)."""
+    require_valid(session.scene, warn)
     params = params or {}
     done = {r["name"]: r for r in session.records}
     ran = []

@@ -54,6 +54,11 @@ class Step:
     params: type
     result: type
     run: Callable[[StepContext], Any]
+    seed_name: str = ""  # the name its generator's seed is derived from (default: its own); steps sharing one draw alike
+
+    def seed(self, session_seed: int) -> int:
+        """The seed of this step's generator in a session with this seed."""
+        return step_seed(session_seed, self.seed_name or self.name)
 
     def make_params(self, values: Mapping[str, Any] | None = None) -> Any:
         """The step's parameters: defaults overridden by `values`, with unknown names refused."""

@@ -14,13 +14,25 @@ import numpy as np
 import trimesh
 
 from .environment import SHAPES, Environment, Obstacle
+from .errors import InputError
 from .geometry import pose
-from .object_mesh import load_object_mesh
+from .object_mesh import (
+    OBJECT_LIMITS,
+    OBSTACLE_LIMITS,
+    UP_AXES,
+    MeshOptions,
+    SizeLimits,
+    load_mesh,
+)
 from .paths import ASSETS
 from .robot import Robot, load_robot
 from .tomlread import Table, load_toml
 
 BUILTIN_OBJECTS = {"statuette": ASSETS / "objects" / "statuette.obj"}
+MAX_OBSTACLES = 500  # more makes every collision check slow (check would run for minutes); merge small parts into meshes
+MAX_COORDINATE = 100.0  # m: a placement farther from the robot than this is a typo or a unit error
+MAX_ANGLE = 2 * np.pi + 1e-6  # rad: larger roll/pitch/yaw values are degrees given as radians
+MAX_SCALE = 1e4  # a mesh scale outside [1/MAX_SCALE, MAX_SCALE] is not a unit conversion
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,6 +52,7 @@ class Scene:
     q_initial: np.ndarray
     q_final: np.ndarray
     meshes: dict[str, trimesh.Trimesh] = field(repr=False, default_factory=dict)  # every mesh the task names, by its task value
+    handover: bool = False  # the task asks for a regrasp even when one arm reaches both placements
 
     def object_at(self, T: np.ndarray) -> trimesh.Trimesh:
         """The object mesh placed at a world pose."""
@@ -47,42 +60,82 @@ class Scene:
 
 
 def _path(tab: Table, key: str, base: Path, search: Path) -> Path:
+    """The file a field names, beside the task file or in `search`; a directory is refused by name."""
     value = tab.str(key)
     for candidate in (base / value, search / value):
         if candidate.is_file():
             return candidate.resolve()
+        if candidate.is_dir():
+            raise tab.error(key, f"'{value}' is a directory ({candidate.resolve()}); expected a file")
     raise tab.error(key, f"file '{value}' not found (looked beside the task file and in {search})")
+
+
+def _pose(tab: Table) -> np.ndarray:
+    """The pose of fields `xyz` (m, within MAX_COORDINATE of the robot) and `rpy` (rad, default 0, at most a turn)."""
+    xyz = tab.vector("xyz", 3)
+    if np.max(np.abs(xyz)) > MAX_COORDINATE:
+        raise tab.error("xyz", f"expected coordinates within {MAX_COORDINATE:g} m of the robot (metres), got {xyz.tolist()}")
+    rpy = tab.vector("rpy", 3, default=[0.0, 0.0, 0.0])
+    if np.max(np.abs(rpy)) > MAX_ANGLE:
+        raise tab.error("rpy", f"expected angles in radians within [-2 pi, 2 pi], got {rpy.tolist()} (degrees given as radians?)")
+    return pose(xyz, rpy)
 
 
 def _placement(tab: Table) -> np.ndarray:
     tab.check_keys({"xyz", "rpy"})
-    return pose(tab.vector("xyz", 3), tab.vector("rpy", 3, default=[0.0, 0.0, 0.0]))
+    return _pose(tab)
 
 
-def _mesh(tab: Table, key: str, base: Path, meshes: dict[str, trimesh.Trimesh]) -> trimesh.Trimesh:
-    """The mesh a field names: from `meshes` when given (a replayed session), else from its file."""
-    value = tab.str(key)
-    if value not in meshes:
-        meshes[value] = load_object_mesh(BUILTIN_OBJECTS.get(value) or _path(tab, key, base, ASSETS / "objects"))
-    return meshes[value]
+def _mesh_options(tab: Table) -> MeshOptions:
+    """The `scale` and `up` fields beside a mesh field."""
+    scale = tab.float("scale", default=1.0, positive=True)
+    if not 1 / MAX_SCALE <= scale <= MAX_SCALE:
+        raise tab.error("scale", f"expected a unit conversion factor between {1 / MAX_SCALE:g} and {MAX_SCALE:g} "
+                                 f"(e.g. 0.001 for a mesh in millimetres), got {scale:g}")
+    up = tab.str("up", default="z")
+    if up not in UP_AXES:
+        raise tab.error("up", f"expected the mesh file's up axis, one of {', '.join(UP_AXES)} (glTF files are y-up), got '{up}'")
+    return MeshOptions(scale, up)
+
+
+def _mesh(tab: Table, key: str, base: Path, meshes: dict[str, trimesh.Trimesh], limits: SizeLimits) -> trimesh.Trimesh:
+    """The mesh a field names, scaled and turned upright by the table's options: from `meshes` when given (a replayed
+    session), else from its file; a fault in the file is reported at the task's field, naming the mesh file."""
+    value, options = tab.str(key), _mesh_options(tab)
+    name = value if options == MeshOptions() else f"{value} (scale {options.scale:g}, up {options.up})"
+    if name not in meshes:
+        path = BUILTIN_OBJECTS.get(value) or _path(tab, key, base, ASSETS / "objects")
+        try:
+            meshes[name] = load_mesh(path, limits, options)
+        except InputError as exc:
+            raise tab.error(key, f"the {limits.what} mesh {exc}") from exc
+    return meshes[name]
+
+
+def _color(tab: Table) -> tuple[int, int, int]:
+    """An RGB colour: three integers 0-255."""
+    color = tab.vector("color", 3, default=[170, 160, 150])
+    if np.any(color != np.round(color)) or np.any(color < 0) or np.any(color > 255):
+        raise tab.error("color", f"expected three integers from 0 to 255 (red, green, blue), got {color.tolist()}")
+    return tuple(int(c) for c in color)
 
 
 def _obstacle(tab: Table, base: Path, meshes: dict[str, trimesh.Trimesh]) -> Obstacle:
-    tab.check_keys({"name", "shape", "size", "xyz", "rpy", "color", "mesh"})
     shape = tab.str("shape")
     if shape not in SHAPES:
         raise tab.error("shape", f"expected one of {', '.join(SHAPES)}, got '{shape}'")
     mesh = None
     size: tuple[float, ...] = ()
     if shape == "mesh":
-        mesh = _mesh(tab, "mesh", base, meshes)
+        tab.str("mesh")  # a missing mesh is named before the keys a primitive would have
+        tab.check_keys({"name", "shape", "xyz", "rpy", "color", "mesh", "scale", "up"})
+        mesh = _mesh(tab, "mesh", base, meshes, OBSTACLE_LIMITS)
     else:
+        tab.check_keys({"name", "shape", "size", "xyz", "rpy", "color"})
         size = tuple(tab.vector("size", SHAPES[shape]).tolist())
-        if min(size) <= 0:
-            raise tab.error("size", "expected positive dimensions (metres)")
-    color = tab.vector("color", 3, default=[170, 160, 150])
-    return Obstacle(tab.str("name"), shape, size, pose(tab.vector("xyz", 3), tab.vector("rpy", 3, default=[0.0, 0.0, 0.0])),
-                    tuple(int(c) for c in color), mesh)
+        if min(size) <= 0 or max(size) > OBSTACLE_LIMITS.high:
+            raise tab.error("size", f"expected positive dimensions up to {OBSTACLE_LIMITS.high:g} m (metres), got {list(size)}")
+    return Obstacle(tab.str("name"), shape, size, _pose(tab), _color(tab), mesh)
 
 
 def _configuration(tab: Table, robot: Robot) -> np.ndarray:
@@ -110,15 +163,19 @@ def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None 
     and `field_prefix` so errors name the field inside the session file.
     """
     root = Table(data, source, field_prefix)
-    root.check_keys({"name", "description", "robot", "object", "obstacles", "robot_initial", "robot_final"})
+    root.check_keys({"name", "description", "robot", "object", "obstacles", "robot_initial", "robot_final", "handover"})
     base = source.parent
     robot = load_robot(robot_path or _path(root, "robot", base, ASSETS / "robots"))
     meshes = dict(meshes or {})
     obj = root.table("object")
-    obj.check_keys({"mesh", "initial", "final"})
+    obj.check_keys({"mesh", "initial", "final", "scale", "up"})
     mesh_name = obj.str("mesh")
-    object_mesh = _mesh(obj, "mesh", base, meshes)
-    obstacles = tuple(_obstacle(t, base, meshes) for t in root.tables("obstacles")) if root.has("obstacles") else ()
+    object_mesh = _mesh(obj, "mesh", base, meshes, OBJECT_LIMITS)
+    obstacle_tables = root.tables("obstacles") if root.has("obstacles") else []
+    if len(obstacle_tables) > MAX_OBSTACLES:
+        raise root.error("obstacles", f"{len(obstacle_tables):,} obstacles, more than the {MAX_OBSTACLES} allowed "
+                                      "(every collision check tests each one); merge small parts into mesh obstacles")
+    obstacles = tuple(_obstacle(t, base, meshes) for t in obstacle_tables)
     names = [o.name for o in obstacles]
     if len(set(names)) != len(names):
         raise root.error("obstacles", "obstacle names must be unique")
@@ -136,6 +193,7 @@ def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None 
         q_initial=_configuration(root.table("robot_initial", default={}), robot),
         q_final=_configuration(root.table("robot_final", default={}), robot),
         meshes=meshes,
+        handover=root.bool("handover", default=False),
     )
 
 

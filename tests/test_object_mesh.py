@@ -152,7 +152,7 @@ def test_missing_file(tmp_path: Path) -> None:
 
 def test_a_directory_is_not_a_file(tmp_path: Path) -> None:
     (tmp_path / "dir.obj").mkdir()
-    assert "no such file" in _load_error(tmp_path / "dir.obj")
+    assert "is a directory; expected a mesh file" in _load_error(tmp_path / "dir.obj")
 
 
 def test_unsupported_format(tmp_path: Path) -> None:

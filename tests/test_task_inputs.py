@@ -475,7 +475,7 @@ TASK_CASES = {
     "robot not a string": ([("set", "robot", 3)], "robot", ["expected a non-empty string"]),
     "robot file not found": ([("set", "robot", "alex_allegro_v2.toml")], "robot",
                              ["'alex_allegro_v2.toml' not found", "looked beside the task file and in"]),
-    "robot file a folder": ([("set", "robot", str(ASSETS / "robots"))], "robot", ["not found"]),
+    "robot file a folder": ([("set", "robot", str(ASSETS / "robots"))], "robot", ["is a directory", "expected a file"]),
     "missing object": ([("rename", "object", "objekt")], "objekt", ["unknown field", "object"]),
     "missing object.initial": ([("del", "object.initial")], "object.initial", ["missing required field"]),
     "missing object.final": ([("del", "object.final")], "object.final", ["missing required field"]),
@@ -510,7 +510,7 @@ TASK_CASES = {
                       f"{OB0}.size", ["expected a list of finite numbers"]),
     "obstacle without a name": ([("del", "obstacles[1].name")], "obstacles[1].name", ["missing required field"]),
     "mesh obstacle without a mesh": ([("set", f"{OB0}.shape", "mesh")], f"{OB0}.mesh", ["missing required field"]),
-    "mesh obstacle file missing": ([("set", f"{OB0}.shape", "mesh"), ("set", f"{OB0}.mesh", "no_such_lamp.obj")],
+    "mesh obstacle file missing": ([("set", f"{OB0}.shape", "mesh"), ("del", f"{OB0}.size"), ("set", f"{OB0}.mesh", "no_such_lamp.obj")],
                                    f"{OB0}.mesh", ["'no_such_lamp.obj' not found"]),
     "color a string": ([("set", f"{OB0}.color", "brown")], f"{OB0}.color", ["expected a list of finite numbers"]),
     "duplicate obstacle names": ([("set", "obstacles[0].name", "twin"), ("set", "obstacles[2].name", "twin")],
@@ -564,5 +564,5 @@ def test_task_whose_robot_is_a_task(tmp_path):
 
 def test_task_object_mesh_of_an_unsupported_format(tmp_path):
     (tmp_path / "statue.txt").write_text("not a mesh\n")
-    err, _ = task_error(tmp_path, edit(TASK, ("set", "object.mesh", "statue.txt")))
-    check(err, tmp_path / "statue.txt", None, "unsupported mesh format '.txt'")
+    err, task = task_error(tmp_path, edit(TASK, ("set", "object.mesh", "statue.txt")))
+    check(err, task, "object.mesh", "the object mesh", str(tmp_path / "statue.txt"), "unsupported mesh format '.txt'")
