@@ -69,7 +69,8 @@ class TaskReport:
         lines += ["", "collision pairs"] + [f"  {k:<28}{v:>6}" for k, v in self.pairs.items()]
         lines += ["", "robot configurations"]
         for name, hits in self.config_collisions.items():
-            lines.append(f"  {name:<10}" + ("collision-free" if not hits else "IN COLLISION: " + ", ".join(f"{a}~{b}" for a, b in hits[:6])))
+            verdict = "collision-free" if not hits else "IN COLLISION: " + ", ".join(f"{a}~{b}" for a, b in hits[:6])
+            lines.append(f"  {name:<10}" + verdict)
         lines += ["", "object placements"]
         for name, hits in self.placement_collisions.items():
             lines.append(f"  {name:<10}" + ("collision-free" if not hits else "IN COLLISION with " + ", ".join(hits)))

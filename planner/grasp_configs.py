@@ -196,7 +196,8 @@ def hand_job(job: HandJob) -> tuple[np.ndarray, HandConfigs, StageLog]:
     log = StageLog()
     collision = job.collision
     placement = "initial" if job.role == "pick" else "final"
-    free = environment_filter(scene.robot, grasps, job.object_pose, ObstacleTest.of_environment(scene.environment, collision.model.params.env_padding))
+    obstacles = ObstacleTest.of_environment(scene.environment, collision.model.params.env_padding)
+    free = environment_filter(scene.robot, grasps, job.object_pose, obstacles)
     log.done(f"{job.role} grasps clear of the environment", free.sum(), f"of {len(grasps)} at the {placement} pose")
     sampler = ConfigSampler(scene.robot, collision, ConfigScorer(scene.robot, job.params.weights()), job.params)
     configs = hand_configurations(sampler, grasps, np.flatnonzero(free), job.object_pose, job.start, job.rng)

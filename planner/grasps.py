@@ -20,8 +20,8 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from .errors import RegraspError
-from .forked import forked_map
 from .finger_workspace import FingerWorkspace, WorkspaceParams, hand_workspaces
+from .forked import forked_map
 from .grasp_frames import box_grid, hopf_rotations
 from .grasp_search import OUTCOMES, FrameGrasp, GraspSearch, SearchParams
 from .hand_model import HandModel, load_hand_model
@@ -212,7 +212,8 @@ def compute_grasp_list(spec: HandSpec, arm: str, mesh: trimesh.Trimesh, p: Grasp
     mask = contact >= 0
     points = np.where(mask[..., None], obj.points[np.maximum(contact, 0)], 0.0)
     normals = np.where(mask[..., None], obj.normals[np.maximum(contact, 0)], 0.0)
-    scores = {s: np.array([getattr(g, s) for g in closed], float) for s in ("epsilon", "com_distance", "com_score", "ellipsoid", "curvature")}
+    scores = {s: np.array([getattr(g, s) for g in closed], float)
+              for s in ("epsilon", "com_distance", "com_score", "ellipsoid", "curvature")}
     best_eps = scores["epsilon"].max() if closed else 1.0
     quality = (p.w_stability * scores["epsilon"] / best_eps + p.w_com * scores["com_score"]
                + p.w_ellipsoid * scores["ellipsoid"] + p.w_curvature * scores["curvature"])

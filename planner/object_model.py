@@ -52,7 +52,8 @@ class ObjectModel:
 
 
 def vertex_mean_curvature(mesh: trimesh.Trimesh) -> np.ndarray:
-    """Discrete mean curvature per vertex: a quarter of |edge| x signed dihedral angle per incident edge, over a third of the incident area."""
+    """Discrete mean curvature per vertex: a quarter of |edge| x signed dihedral angle per incident edge, over a third of
+    the incident area."""
     edges = mesh.face_adjacency_edges
     angles = mesh.face_adjacency_angles * np.where(mesh.face_adjacency_convex, 1.0, -1.0)
     lengths = np.linalg.norm(mesh.vertices[edges[:, 0]] - mesh.vertices[edges[:, 1]], axis=1)

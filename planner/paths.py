@@ -60,7 +60,8 @@ def plain_name(value: object, source: str | Path, field: str) -> str:
     if bad:
         raise InputError(source, field, f"expected a plain file name (no folder separators or control characters), got {value!r}")
     if len(value.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
-        raise InputError(source, field, f"expected a file name of at most {MAX_NAME_BYTES} bytes, got {len(value.encode('utf-8', 'surrogatepass'))}")
+        size = len(value.encode("utf-8", "surrogatepass"))
+        raise InputError(source, field, f"expected a file name of at most {MAX_NAME_BYTES} bytes, got {size}")
     return value
 
 

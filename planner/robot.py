@@ -197,7 +197,8 @@ def build_robot(spec: RobotSpec) -> Robot:
             i = model.joints[jid].idx_q
             lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
             if not lo - 1e-9 <= value <= hi + 1e-9:
-                raise InputError(spec.source, f"body.locked_joints.{name}", f"joint '{name}' locked at {value}, outside its limits [{lo:.4g}, {hi:.4g}]")
+                raise InputError(spec.source, f"body.locked_joints.{name}",
+                                 f"joint '{name}' locked at {value}, outside its limits [{lo:.4g}, {hi:.4g}]")
             q_ref[i] = value
         model, (coll, vis) = pin.buildReducedModel(model, [coll, vis], ids, q_ref)
     if model.nq != model.nv:

@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-
 from .paths import ASSETS, robot_data_file
 from .tomlread import Table, load_toml
 

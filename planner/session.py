@@ -85,7 +85,8 @@ def _load_meshes(folder: Path) -> dict[str, trimesh.Trimesh]:
             raise InputError(path, f"{i}_key", f"expected a string, got {key.dtype} of shape {key.shape}")
         if vertices.dtype != np.float64 or vertices.ndim != 2 or vertices.shape[1] != 3 or not np.isfinite(vertices).all():
             raise InputError(path, f"{i}_vertices", f"expected finite float64 (n, 3), got {vertices.dtype} of shape {vertices.shape}")
-        if faces.dtype.kind not in "iu" or faces.ndim != 2 or faces.shape[1] != 3 or (faces.size and (faces.min() < 0 or faces.max() >= len(vertices))):
+        out_of_range = faces.size and (faces.min() < 0 or faces.max() >= len(vertices))
+        if faces.dtype.kind not in "iu" or faces.ndim != 2 or faces.shape[1] != 3 or out_of_range:
             raise InputError(path, f"{i}_faces", f"expected (m, 3) integer indices below {len(vertices)}")
         out[str(key)] = trimesh.Trimesh(vertices, faces, process=False)
     return out

@@ -66,7 +66,8 @@ class Step:
         known = {f.name for f in dataclasses.fields(self.params)}
         unknown = set(values) - known
         if unknown:
-            raise RegraspError(f"step '{self.name}' has no parameter {', '.join(sorted(unknown))} (parameters: {', '.join(sorted(known)) or 'none'})")
+            names = ", ".join(sorted(known)) or "none"
+            raise RegraspError(f"step '{self.name}' has no parameter {', '.join(sorted(unknown))} (parameters: {names})")
         defaults = self.params()
         for name, value in values.items():
             expected = type(getattr(defaults, name))

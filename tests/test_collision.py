@@ -5,7 +5,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.collision import _candidate_pairs, compute_pair_set, CollisionParams, robot_pair_set, simplified_robot_geometry
+from planner.collision import CollisionParams, _candidate_pairs, compute_pair_set, robot_pair_set, simplified_robot_geometry
 from planner.geometry import se3
 from planner.reach import reach
 

@@ -120,6 +120,6 @@ def test_full_disk_keeps_the_finished_steps_and_no_temporary_file(tmp_path: Path
     _refused(report["plan"], mnt / "s", "No space left on device [ENOSPC]")
     assert report["finished"] == ["arms", "pick_grasps", "place_grasps"]
     assert report["save"].startswith("OutputError: ") and "[ENOSPC]" in report["save"] and str(mnt / "sessions") in report["save"]
-    session_files = sorted(f"s/{n}" for n in ["session.json", "task_meshes.npz"] + [f"{s}.{e}" for s in ("arms", "pick_grasps", "place_grasps")
-                                                                                  for e in ("npz", "json")])
+    steps = [f"{s}.{e}" for s in ("arms", "pick_grasps", "place_grasps") for e in ("npz", "json")]
+    session_files = sorted(f"s/{n}" for n in ["session.json", "task_meshes.npz"] + steps)
     assert report["files"] == sorted(["filler", "s", "sessions", *session_files]), "a temporary or staging file was left"

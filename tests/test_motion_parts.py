@@ -125,7 +125,8 @@ def test_lazy_transit_goes_around_the_object(example):
     shape = coal_mesh(scene.object_mesh)
     big = int(np.bincount(roadmap.node_component).argmax())
     nodes = np.flatnonzero(roadmap.node_component == big)
-    q_start, q_goal = scene.q_initial, roadmap.node_q[nodes[np.argmax(np.linalg.norm(roadmap.wrists[nodes, 0] - roadmap.wrists[nodes[0], 0], axis=1))]]
+    far = np.argmax(np.linalg.norm(roadmap.wrists[nodes, 0] - roadmap.wrists[nodes[0], 0], axis=1))
+    q_start, q_goal = scene.q_initial, roadmap.node_q[nodes[far]]
     space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
     free = make_validity(situation_model(cm, shape, Situation(None, np.diag([1.0, 1, 1, 1]) @ _far()), (), idx), profile, "moving")
     first = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TransitParams(), np.random.default_rng(0),

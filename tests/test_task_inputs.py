@@ -377,7 +377,8 @@ def test_arm_rest_outside_joint_limits_names_the_joint(tmp_path):
 
 def test_finger_open_outside_joint_limits_names_the_joint(tmp_path, light):
     err, path = build_error(tmp_path, edit(light, ("set", f"{FINGER0}.open[3]", 9.0)))
-    check(err, path, "arms.right.hand.fingers.open", "outside the joint limits", "right_hand/" + SPEC["arms"]["right"]["hand"]["fingers"][0]["joints"][3])
+    joint = SPEC["arms"]["right"]["hand"]["fingers"][0]["joints"][3]
+    check(err, path, "arms.right.hand.fingers.open", "outside the joint limits", "right_hand/" + joint)
 
 
 def test_locked_joint_not_in_urdf(tmp_path, light):

@@ -222,7 +222,8 @@ def test_plan_refuses_a_placement_inside_an_obstacle_with_checks_message(tmp_pat
                          check=False, capture_output=True, text=True, timeout=300)
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "the object's final placement penetrates vase" in run.stderr and not out.exists()
-    check = subprocess.run([sys.executable, "-m", "planner.cli", "check", str(path)], check=False, capture_output=True, text=True, timeout=300)
+    check = subprocess.run([sys.executable, "-m", "planner.cli", "check", str(path)], check=False, capture_output=True, text=True,
+                           timeout=300)
     assert check.returncode == 1 and "PROBLEM: the object's final placement penetrates vase" in check.stdout
     session = Session.create(tmp_path / "direct", scene, 0)  # the workbench's way in: run_pipeline validates too
     with pytest.raises(InvalidTask, match="penetrates vase"):
@@ -231,7 +232,8 @@ def test_plan_refuses_a_placement_inside_an_obstacle_with_checks_message(tmp_pat
 
 
 def test_check_says_what_the_reach_distance_is():
-    run = subprocess.run([sys.executable, "-m", "planner.cli", "check", "default"], check=False, capture_output=True, text=True, timeout=300)
+    run = subprocess.run([sys.executable, "-m", "planner.cli", "check", "default"], check=False, capture_output=True, text=True,
+                         timeout=300)
     assert run.returncode == 0, run.stderr
     assert "The distance is the closest that centre came" in run.stdout and "cm short" in run.stdout
     assert "arms: right picks, left places" in run.stdout

@@ -10,8 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import (CHANGED, EXAMPLE, _example_before, _free_port, _open, _run_up_to_from_the_gui, _settled, _until_changed,
-                                    _wait_for)
+from test_workbench_browser import (
+    CHANGED,
+    EXAMPLE,
+    _example_before,
+    _free_port,
+    _open,
+    _run_up_to_from_the_gui,
+    _settled,
+    _until_changed,
+    _wait_for,
+)
 
 from workbench.app import Workbench
 from workbench.layers import LAYERS

@@ -8,8 +8,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import (CHANGED, EXAMPLE, _example_before, _free_port, _open, _run_up_to_from_the_gui, _settled, _until_changed,
-                                    _wait_for)
+from test_workbench_browser import (
+    CHANGED,
+    EXAMPLE,
+    _example_before,
+    _free_port,
+    _open,
+    _run_up_to_from_the_gui,
+    _settled,
+    _until_changed,
+    _wait_for,
+)
 
 from planner.session import Session
 from workbench.app import Workbench

@@ -15,8 +15,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
 from scipy.spatial.transform import Rotation
-from test_workbench_browser import (CHANGED, EXAMPLE, VIEWPORT, _changed, _free_port, _open, _settled, _until_changed, _view,
-                                    _wait_for)
+from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _changed, _free_port, _open, _settled, _until_changed, _view, _wait_for
 
 from planner.motion.result import PHASES, Motion
 from planner.session import Session

@@ -7,8 +7,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import (CHANGED, EXAMPLE, _changed, _free_port, _open, _settled,
-                                    _until_changed, _view, _wait_for)
+from test_workbench_browser import CHANGED, EXAMPLE, _changed, _free_port, _open, _settled, _until_changed, _view, _wait_for
 
 from planner.roadmap.build import wrist_positions
 from workbench.app import Workbench

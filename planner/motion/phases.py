@@ -8,8 +8,9 @@ retreating. Place: transit with the placing hand to above the final placement, s
 retreat. Rest: transit to the final configuration, where both hands open fully (opened near the
 object, fingers that wrapped around it would hit it).
 Straight hand motions are IK waypoints of the arm and the torso; while the other hand holds the
-object, its palm is held still by the same IK, so the object does not move. Every piece is checked with the validity of its situation; a piece that fails
-raises `PieceFailed` naming the phase and the part.
+object, its palm is held still by the same IK, so the object does not move. Every piece is checked
+with the validity of its situation; a piece that fails raises `PieceFailed` naming the phase and the
+part.
 """
 from __future__ import annotations
 
@@ -32,7 +33,6 @@ from .situation import Situation, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
 from .validity import Profile, clearances, fitted, make_validity
-
 
 
 @dataclass(frozen=True)
@@ -130,7 +130,16 @@ class PhasePlanner:
                 continue
             yield path
 
-    def first(self, phase: int, part: str, candidates: Iterator[np.ndarray], build) -> list[Piece]:
+    def shaped(self, grasp: HandGrasp, retreats: Iterator[np.ndarray]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """(pre-shape, approach path reversed with the fingers in it) candidates: each retreat with the fingers open by the
+        pre-shape fraction, then half and a fifth as much (fingers sweep less where the hands are close)."""
+        paths = list(retreats)
+        for fraction in (self.p.preshape, 0.5 * self.p.preshape, 0.2 * self.p.preshape):
+            pre = self.opened(grasp, fraction)
+            for path in paths:
+                yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
+
+    def first(self, phase: int, part: str, candidates: Iterator, build) -> list[Piece]:
         """The pieces `build` makes of the first candidate for which it raises no PieceFailed."""
         failure = None
         for candidate in candidates:
@@ -248,33 +257,32 @@ class PhasePlanner:
         support_i, support_f = self.supports(oi), self.supports(of)
 
         # Grasp
-        pre_a, let_a = self.opened(a, p.preshape), self.opened(a, p.release, True)
+        let_a = self.opened(a, p.release, True)
 
-        def grasp(retreat: np.ndarray) -> list[Piece]:
-            approach = retreat[::-1]
+        def grasp(shaped: tuple[np.ndarray, np.ndarray]) -> list[Piece]:
+            pre_a, approach = shaped[0], shaped[1][::-1]
             q_pre = self.with_fingers(approach[0], a.arm, open_a)
             out = [self.contact(0, "approach", approach, static_i, a.arm)]
             out = [self.transit(0, scene.q_initial, q_pre, static_i)] + self.fingers(0, "pre-shape", q_pre, a.arm, pre_a, static_i) + out
             return out + self.fingers(0, "closing", approach[-1], a.arm, a.fingers, Situation(None, oi, tips_a))
 
-        pieces += self.first(0, "pre-grasp", self.retreats(self.with_fingers(q_grasp, a.arm, pre_a), a.arm, None, True, 0, "pre-grasp"),
-                             grasp)
+        pieces += self.first(0, "pre-grasp", self.shaped(a, self.retreats(q_grasp, a.arm, None, True, 0, "pre-grasp")), grasp)
 
         # Carry
         lift = self.straight(pieces[-1].path[-1], a.arm, up, None, 1, "lift")
         pieces.append(self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i), a.arm))
-        pre_b, let_b = self.opened(b, p.preshape), self.opened(b, p.release, True)
+        let_b = self.opened(b, p.release, True)
         q_x = self.with_fingers(q_exch, a.arm, a.fingers)
 
-        def exchange(retreat: np.ndarray) -> list[Piece]:
-            approach_b = retreat[::-1]
+        def exchange(shaped: tuple[np.ndarray, np.ndarray]) -> list[Piece]:
+            pre_b, approach_b = shaped[0], shaped[1][::-1]
             q_pre_b = self.with_fingers(approach_b[0], b.arm, open_b)
             out = [self.contact(1, "approach", approach_b, held_a, b.arm)]
             out = [self.transit(1, lift[-1], q_pre_b, held_a)] + self.fingers(1, "pre-shape", q_pre_b, b.arm, pre_b, held_a) + out
             return out + self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
 
-        pieces += self.first(1, "exchange pre-grasp", self.retreats(self.with_fingers(q_x, b.arm, pre_b), b.arm, a.arm, False, 1,
-                                                                     "exchange pre-grasp"), exchange)
+        pieces += self.first(1, "exchange pre-grasp", self.shaped(b, self.retreats(q_x, b.arm, a.arm, False, 1, "exchange pre-grasp")),
+                             exchange)
         released = Situation(b.arm, g_b, tips_a)
         pieces += self.fingers(1, "opening", pieces[-1].path[-1], a.arm, let_a, released)
 

@@ -41,8 +41,9 @@ class MotionParams:
 @dataclass(frozen=True)
 class Motion:
     """A trajectory sampled at `rate`: time, configuration, phase (0..3: Grasp, Carry, Place, Rest), the object's world
-    pose, which arm holds it (-1: none) and which arm's hand works at the object (-1: none), each wrist's position; `keyframes` are the samples at q_initial, q_grasp,
-    q_exch, q_place and q_final. `phases` holds Table I's counts per phase (seconds are in the session record)."""
+    pose, which arm holds it (-1: none) and which arm's hand works at the object (-1: none), each wrist's position;
+    `keyframes` are the samples at q_initial, q_grasp, q_exch, q_place and q_final. `phases` holds Table I's counts per
+    phase (seconds are in the session record)."""
 
     planner: str
     double_grasp: int  # rank of the double grasp used (-1 when none worked)

@@ -187,7 +187,8 @@ class LazyTransit:
                 continue
             a, b = self._bounds(last, start, goal)
             stats.rrt_calls += 1
-            found = _rrt(self.space, self.near if a in self.ends or b in self.ends else self.full, self._config(a), self._config(b), int(self.rng.integers(2**31)), self.p.reconnect_time,
+            check = self.near if a in self.ends or b in self.ends else self.full
+            found = _rrt(self.space, check, self._config(a), self._config(b), int(self.rng.integers(2**31)), self.p.reconnect_time,
                          self.p.rrt_step)
             if found is not None:
                 ids = self.graph.add_nodes(found[1:-1])

@@ -15,8 +15,8 @@ which links the halves of the graph with either source at a fraction of the cost
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse.csgraph import connected_components
 from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 
 def node_candidates(n0: int, n1: int) -> tuple[np.ndarray, np.ndarray]:

@@ -39,8 +39,8 @@ JOINT_STEP = 0.05  # rad: ... and the largest joint move (for the torso, which m
 
 
 def _shade(color: tuple[int, int, int], factor: float) -> tuple[int, int, int]:
-    h, l, s = colorsys.rgb_to_hls(*(c / 255 for c in color))
-    r, g, b = colorsys.hls_to_rgb(h, min(1.0, l * factor), s)
+    h, light, s = colorsys.rgb_to_hls(*(c / 255 for c in color))
+    r, g, b = colorsys.hls_to_rgb(h, min(1.0, light * factor), s)
     return int(r * 255), int(g * 255), int(b * 255)
 
 
