@@ -171,13 +171,14 @@ class PhasePlanner:
         return q
 
     def opened(self, grasp: HandGrasp, fraction: float, touching_only: bool = False) -> np.ndarray:
-        """Finger values `fraction` of the way from the grasp to the open hand (only the touching fingers' when
-        `touching_only`: letting go, the others stay clear of the object where they are)."""
+        """Finger values with the flexing joints `fraction` of the way from the grasp to the open hand (each finger's first
+        joint, which spreads it sideways, stays: opening it swings the finger across the object); only the touching
+        fingers' when `touching_only` (letting go: the others stay clear of the object where they are)."""
         hand = self.robot.hand_idx[grasp.arm]
-        step = fraction * (self.open[hand] - grasp.fingers)
-        if touching_only:
-            moving = np.isin(hand, np.concatenate([self.robot.finger_idx[grasp.arm][f] for f in grasp.touching]))
-            step = np.where(moving, step, 0.0)
+        fingers = self.robot.finger_idx[grasp.arm]
+        names = grasp.touching if touching_only else list(fingers)
+        flexing = np.concatenate([fingers[f][1:] for f in names])  # a finger's first joint spreads it: it stays
+        step = np.where(np.isin(hand, flexing), fraction * (self.open[hand] - grasp.fingers), 0.0)
         return grasp.fingers + step
 
     # ----- validity
