@@ -1,30 +1,21 @@
-"""End to end through double grasps (slow): the generated objects' success table, the Baxter task, a millimetre mesh
-with its scale, and a both-arms-reach task asking for a handover."""
+"""End to end through double grasps (slow): the Baxter task, a millimetre mesh with its scale, and a both-arms-reach task
+asking for a handover. The generated objects' success table is a measurement, not a test: `python tests/generated_objects.py`
+prints it (24 plans, too long for the suite)."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
 from generated_objects import (
-    PLACEMENTS,
-    SUCCESS_RATE,
     TASK_TEXT_ROBOT,
     plan_outcome,
     succeeded,
-    success_table,
 )
 
 from planner.object_mesh import load_object_mesh
 from planner.statuette import STATUETTE_PATH
 
 pytestmark = pytest.mark.slow
-
-
-def test_generated_objects_reach_double_grasps_at_85_percent(tmp_path):
-    rows = success_table(tmp_path, report=lambda row: None)
-    assert len(rows) >= 8 * len(PLACEMENTS)
-    failed = [row for row in rows if not succeeded(row[2])]
-    assert len(rows) - len(failed) >= SUCCESS_RATE * len(rows), "\n".join(" | ".join(row) for row in failed)
 
 
 def test_baxter_task_plans_through_double_grasps(tmp_path):
