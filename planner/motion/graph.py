@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import connected_components
 
+from ..roadmap.query import shortest_path
 from ..roadmap.result import Roadmap
 
 UNKNOWN, VALID, INVALID = 0, 1, -1
@@ -68,16 +69,7 @@ class PhaseStatus:
     def shortest_path(self, weights: np.ndarray, source: int, target: int) -> list[int] | None:
         """Node ids of a shortest path over the usable edges (weights per edge), or None."""
         use = self.usable()
-        e, w = self.graph.edges[use], np.maximum(weights[use], 1e-12)
-        n = len(self.graph.q)
-        m = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
-        dist, pred = dijkstra(m, directed=False, indices=source, return_predecessors=True)
-        if not np.isfinite(dist[target]):
-            return None
-        path = [target]
-        while path[-1] != source:
-            path.append(int(pred[path[-1]]))
-        return path[::-1]
+        return shortest_path(len(self.graph.q), self.graph.edges[use], weights[use], source, target)
 
     def components(self) -> np.ndarray:
         """Connected-component label of every node over the usable edges."""

@@ -49,17 +49,20 @@ class Graph:
     def shortest_path(self, source: int, target: int) -> list[int] | None:
         """Node ids of a shortest path over the valid edges (joint-space length), or None."""
         e = self.edges[self.valid]
-        n = len(self.q)
-        # a zero-length edge would vanish from a sparse matrix: weigh every edge at least a tiny bit
-        w = np.maximum(np.linalg.norm(self.q[e[:, 0]] - self.q[e[:, 1]], axis=1), 1e-12)
-        graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
-        dist, pred = dijkstra(graph, directed=False, indices=source, return_predecessors=True)
-        if not np.isfinite(dist[target]):
-            return None
-        path = [target]
-        while path[-1] != source:
-            path.append(int(pred[path[-1]]))
-        return path[::-1]
+        return shortest_path(len(self.q), e, np.linalg.norm(self.q[e[:, 0]] - self.q[e[:, 1]], axis=1), source, target)
+
+
+def shortest_path(n: int, edges: np.ndarray, weights: np.ndarray, source: int, target: int) -> list[int] | None:
+    """Node ids of a shortest path (Dijkstra) over undirected weighted edges among n nodes, or None."""
+    # a zero-length edge would vanish from a sparse matrix: weigh every edge at least a tiny bit
+    graph = coo_matrix((np.maximum(weights, 1e-12), (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+    dist, pred = dijkstra(graph, directed=False, indices=source, return_predecessors=True)
+    if not np.isfinite(dist[target]):
+        return None
+    path = [target]
+    while path[-1] != source:
+        path.append(int(pred[path[-1]]))
+    return path[::-1]
 
 
 @dataclass(frozen=True)
