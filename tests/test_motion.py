@@ -148,9 +148,13 @@ class Oracle:
         pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd, q)
         return [self.gd.oMg[g].homogeneous for g in range(len(self.names))]
 
+    def object_hits(self, q: np.ndarray, object_pose: np.ndarray) -> list[str]:
+        """Names of the robot links that hit the object at q (every link: nothing holds it)."""
+        return self.collisions(q, object_pose, None, None, False, only_object=True)
+
     def collisions(self, q: np.ndarray, object_pose: np.ndarray, holder: str | None, active: str | None,
-                   near_support: bool) -> list[str]:
-        """Names of the colliding pairs at q (empty when free)."""
+                   near_support: bool, only_object: bool = False) -> list[str]:
+        """Names of the colliding pairs at q (empty when free); `only_object`: the robot against the object alone."""
         poses = self._poses(q)
         rot = np.array([T[:3, :3] for T in poses])
         centres = np.einsum("gij,gj->gi", rot, self.centre) + np.array([T[:3, 3] for T in poses])
@@ -159,7 +163,7 @@ class Oracle:
         found = []
         moving = np.array(self.moving)
         near_env = np.linalg.norm(centres[moving, None] - self.env_centre[None], axis=2) < self.radius[moving, None] + self.env_radius
-        for a, e in zip(*np.nonzero(near_env)):
+        for a, e in zip(*np.nonzero(near_env & (not only_object))):
             g, (name, geom, T) = moving[a], self.env[e]
             if _hit(self.shapes[g], poses[g], geom, T):
                 found.append(f"{self.names[g]} with {name}")
@@ -167,6 +171,8 @@ class Oracle:
         for g in moving[near_object]:
             if g not in excused and _hit(self.shapes[g], poses[g], self.object, object_pose):
                 found.append(f"{self.names[g]} with the object")
+        if only_object:
+            return found
         if holder is not None:
             for e in np.flatnonzero(np.linalg.norm(self.env_centre - ocentre, axis=1) < self.object_radius + self.env_radius):
                 name, geom, T = self.env[e]

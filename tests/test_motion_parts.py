@@ -1,9 +1,9 @@
 """The motion's building blocks: timing under limits, the joint space, the object in the collision model, lazy transit.
 
 The lazy-transit test uses the example session's Super Graph and puts the statuette, as a static
-obstacle, in the middle of the path the graph returns without it: the planner must invalidate edges
-and come back with a path that an independent re-check (every segment at ten times the resolution,
-every pair of the situation) finds free.
+obstacle, in the middle of the path the graph returns without it: the planner must search again and
+come back with a path that an independent re-check (the robot's URDF geometry against the object with
+python-fcl, every segment at ten times the resolution of the object's pairs) finds free.
 """
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_motion import Oracle
 
 from planner.motion.space import JointSpace
 from planner.motion.timing import sample_polyline, segment_duration
@@ -68,46 +69,6 @@ def example(tmp_path_factory):
     return s.scene, s.result("roadmap"), s.result("pick_grasps")
 
 
-def _fcl_hits(scene, q, object_pose) -> bool:
-    """Independent oracle: every robot link of the URDFs' collision models (full meshes, not hulls; boxes, cylinders and
-    spheres) against the object's mesh, through python-fcl."""
-    import fcl
-    import pinocchio as pin
-
-    robot = scene.robot
-    data = robot.model.createData()
-    gdata = pin.GeometryData(robot.collision_model)
-    pin.updateGeometryPlacements(robot.model, data, robot.collision_model, gdata, q)
-    mesh = scene.object_mesh
-    bvh = fcl.BVHModel()
-    bvh.beginModel(len(mesh.vertices), len(mesh.faces))
-    bvh.addSubModel(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int32))
-    bvh.endModel()
-    obj = fcl.CollisionObject(bvh, fcl.Transform(object_pose[:3, :3], object_pose[:3, 3]))
-    for g, go in enumerate(robot.collision_model.geometryObjects):
-        if go.parentJoint == 0:
-            continue
-        geom = go.geometry
-        if hasattr(geom, "vertices"):
-            v = np.asarray(geom.vertices()) * np.asarray(go.meshScale)
-            tris = np.array([[t[0], t[1], t[2]] for t in (geom.tri_indices(i) for i in range(geom.num_tris))], np.int32)
-            m = fcl.BVHModel()
-            m.beginModel(len(v), len(tris))
-            m.addSubModel(v, tris)
-            m.endModel()
-        elif hasattr(geom, "halfSide"):
-            m = fcl.Box(*(2 * np.asarray(geom.halfSide)))
-        elif hasattr(geom, "halfLength"):
-            m = fcl.Cylinder(geom.radius, 2 * geom.halfLength)
-        else:
-            m = fcl.Sphere(geom.radius)
-        T = gdata.oMg[g]
-        link = fcl.CollisionObject(m, fcl.Transform(T.rotation, T.translation))
-        if fcl.collide(link, obj, fcl.CollisionRequest(), fcl.CollisionResult()):
-            return True
-    return False
-
-
 @pytest.mark.slow
 def test_lazy_transit_goes_around_the_object(example):
     from planner.collision import build_collision_model
@@ -148,10 +109,11 @@ def test_lazy_transit_goes_around_the_object(example):
     assert stats.searches > 1, "the first path must have been rejected and the graph searched again"
     assert not np.any(np.all(np.isclose(path, mid), axis=1)), "the blocked configuration is not on the new path"
     assert np.allclose(path[0], q_start) and np.allclose(path[-1], q_goal)
+    oracle = Oracle(scene)
     for a, b in zip(path[:-1], path[1:]):
-        for s in np.linspace(0, 1, 10 * blocked.samples(a, b)):
+        for s in np.linspace(0, 1, 10 * blocked.samples(a, b, "object")):
             q = a + s * (b - a)
-            assert not _fcl_hits(scene, q, pose)
+            assert not oracle.object_hits(q, pose)
 
 
 def _far() -> np.ndarray:

@@ -97,6 +97,9 @@ def test_regrasp_replay_draws_the_saved_results(browser: Browser, example: Sessi
 
 @pytest.mark.browser
 def test_robot_goes_to_a_witness_configuration(workbench: Workbench, page: Page, example: Session) -> None:
+    layers = workbench.session_layers.layers.values()
+    for layer in layers:  # the robot alone in view: the step layers' drawings (the motion's routes) cover parts of it
+        layer.visible = False
     before = _settled(page)
     panel = workbench.session_panel
     label = next(o for o in panel.robot_at.options if "q_pick" in o)
@@ -106,12 +109,14 @@ def test_robot_goes_to_a_witness_configuration(workbench: Workbench, page: Page,
         assert _until_changed(page, before) > CHANGED, "posing the robot at q_pick changed nothing on screen"
     finally:
         workbench.reset()
+        for layer in layers:
+            layer.visible = True
 
 
 @pytest.mark.browser
 def test_export_button_downloads_what_is_shown(page: Page) -> None:
-    with page.expect_download(timeout=30_000) as download:
-        page.get_by_role("button", name="Export HTML").click()
+    with page.expect_download(timeout=120_000) as download:  # the example's motion is recorded frame by frame
+        page.get_by_role("button", name="Export HTML").click(timeout=120_000)
     html = Path(download.value.path()).read_text()
     assert "__VISER_EMBED_DATA__" in html and len(html) < MAX_HTML_BYTES
 
