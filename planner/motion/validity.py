@@ -89,9 +89,9 @@ class Validity:
         """Every check of the straight segment passes (`ends=False`: both ends are known valid)."""
         return self.seg.segment_free(qa, qb, self.subset, ends)
 
-    def samples(self, qa: np.ndarray, qb: np.ndarray) -> int:
-        """How many evenly spaced configurations a segment is checked at (its resolution)."""
-        return int(self.seg.steps(qa, qb, self.subset)[0])
+    def samples(self, qa: np.ndarray, qb: np.ndarray, subset: str | None = None) -> int:
+        """How many evenly spaced configurations a segment is checked at (its resolution), for this or another subset."""
+        return int(self.seg.steps(qa, qb, subset or self.subset)[0])
 
     def first_collision(self, path: np.ndarray) -> list[tuple[str, str]]:
         """The colliding pairs at the first configuration of a polyline that fails its checks (for messages)."""
