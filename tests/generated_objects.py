@@ -85,7 +85,7 @@ class Placement:
 
 
 PLACEMENTS = {  # the right hand picks, the left places; the tasks ask for the handover (nearer the middle both arms reach)
-    "behind_lamp": Placement((0.45, -0.85, 0.72, 1.2), (0.62, 0.90, 0.72, 2.7)),  # the default task's pick
+    "beside_lamp": Placement((0.45, -0.85, 0.72, 1.2), (0.66, 0.84, 0.72, 2.7)),  # the default task's pick
     "turned": Placement((0.50, -0.80, 0.72, 0.8), (0.62, 0.78, 0.72, 0.0)),
     "nearer": Placement((0.55, -0.72, 0.72, 2.0), (0.64, 0.68, 0.72, -0.8)),
 }
