@@ -21,7 +21,7 @@ import numpy as np
 from .graph import INVALID, VALID, MotionGraph, PhaseStatus
 from .rrt import rrt_connect
 from .space import JointSpace
-from .validity import Validity
+from .validity import MotionValidity
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class TransitFailed(Exception):
     """No transit path: `part` names what failed (for the step's failure message)."""
 
 
-def _rrt(space: JointSpace, full: Validity, qa: np.ndarray, qb: np.ndarray, seed: int, time_limit: float,
+def _rrt(space: JointSpace, full: MotionValidity, qa: np.ndarray, qb: np.ndarray, seed: int, time_limit: float,
          step: float) -> np.ndarray | None:
     """RRTConnect between two full configurations of the space with full validity, extending by at most `step` (joint-space
     distance; short steps keep each motion check cheap); the path as full configurations."""
@@ -69,7 +69,7 @@ class LazyTransit:
     """Transit queries of one phase on the shared graph: `lazy` checks roadmap elements, `full` everything else, and
     `near` (denser: paddings fitted to the query's ends) whatever touches the start or the goal."""
 
-    def __init__(self, graph: MotionGraph, space: JointSpace, lazy: Validity, full: Validity, near: Validity,
+    def __init__(self, graph: MotionGraph, space: JointSpace, lazy: MotionValidity, full: MotionValidity, near: MotionValidity,
                  params: TransitParams, rng: np.random.Generator, stats: TransitStats):
         self.graph, self.space, self.lazy, self.full, self.near, self.p, self.rng, self.stats = \
             graph, space, lazy, full, near, params, rng, stats
@@ -206,7 +206,7 @@ class LazyTransit:
                             f"{stats.rrt_calls} RRT reconnections")
 
 
-def rrt_transit(space: JointSpace, full: Validity, q_start: np.ndarray, q_goal: np.ndarray, params: TransitParams,
+def rrt_transit(space: JointSpace, full: MotionValidity, q_start: np.ndarray, q_goal: np.ndarray, params: TransitParams,
                 rng: np.random.Generator, stats: TransitStats) -> np.ndarray:
     """The single-query baseline: RRTConnect between the ends, every pair checked."""
     t = time.perf_counter()
@@ -219,7 +219,7 @@ def rrt_transit(space: JointSpace, full: Validity, q_start: np.ndarray, q_goal: 
     return found
 
 
-def shortcut(path: np.ndarray, full: Validity, near: Validity, rng: np.random.Generator, attempts: int) -> np.ndarray:
+def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: np.random.Generator, attempts: int) -> np.ndarray:
     """Random shortcuts between two points of the polyline (by arc length), kept when the straight motion is valid
     (checked with `near` when it leaves the first segment or reaches the last: close to the ends)."""
     path = np.array(path, dtype=float)

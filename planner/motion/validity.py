@@ -22,11 +22,16 @@ from ..roadmap.local_planner import SegmentChecker, van_der_corput
 
 
 class StateValidity(Protocol):
+    """OMPL's StateValidityChecker: is this configuration valid?"""
+
     def state_valid(self, q: np.ndarray) -> bool: ...
 
 
 class MotionValidity(StateValidity, Protocol):
-    checks: int
+    """OMPL's MotionValidator: is the straight motion between two configurations valid (and how many checks so far)?"""
+
+    @property
+    def checks(self) -> int: ...
 
     def motion_valid(self, qa: np.ndarray, qb: np.ndarray, ends: bool = True) -> bool: ...
 
