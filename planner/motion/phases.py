@@ -71,6 +71,7 @@ class PhasePlanner:
         self.transit_profile, self.contact_profile, self.p, self.rng, self.baseline = transit, contact, params, rng, baseline
         self.shape = coal_mesh(scene.object_mesh)
         self.data = self.robot.model.createData()
+        self.iks: dict[tuple[str, ...], ArmIK] = {}  # one solver (and its scratch data) per set of arms
         self.stats = [TransitStats() for _ in PHASES]
         self.transit_params = TransitParams(params.connections, params.max_connections, params.max_searches, params.max_reconnections,
                                             params.reconnect_time, params.rrt_time, params.rrt_step, params.shortcut_attempts)
@@ -90,7 +91,9 @@ class PhasePlanner:
         arms, targets = (arm,), [target]
         if keep is not None:
             arms, targets = (arm, keep), [target, self.palm(q, keep)]
-        result = ArmIK(self.robot, arms).solve(np.array(targets), q, 60, tol, 10 * tol, damping=damping, stall=20)
+        if arms not in self.iks:
+            self.iks[arms] = ArmIK(self.robot, arms)
+        result = self.iks[arms].solve(np.array(targets), q, 60, tol, 10 * tol, damping=damping, stall=20)
         return result.q if result.within(tol, 10 * tol) else None
 
     def refine(self, q: np.ndarray, arm: str, target: np.ndarray, keep: str | None, phase: int, part: str) -> np.ndarray:
@@ -119,11 +122,11 @@ class PhasePlanner:
         """Candidate IK polylines from q (the palm at a grasp) backing off along the approach direction (the pre-grasp
         distance, farther, nearer), then rising by the lift height when `hover` (the object rests on a support there;
         elsewhere rising is the last resort). Candidates the arm cannot follow are skipped."""
-        d, up = self.p.pregrasp_distance, np.array([0.0, 0.0, self.p.lift])
+        up, back = np.array([0.0, 0.0, self.p.lift]), self.backoff(q, arm)
         rises = (1.0, 1.0, 2.0, 1.0) if hover else (0.0, 0.0, 0.0, 1.0)
         for scale, rise in zip((1.0, 1.7, 1.0, 0.5) if hover else (1.0, 1.7, 0.5, 1.0), rises):
             try:
-                path = self.straight(q, arm, scale * d / self.p.pregrasp_distance * self.backoff(q, arm), keep, phase, part)
+                path = self.straight(q, arm, scale * back, keep, phase, part)
                 if rise:
                     path = np.concatenate([path, self.straight(path[-1], arm, rise * up, keep, phase, part)[1:]])
             except PieceFailed:
