@@ -35,3 +35,13 @@ def browser():
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
         yield browser
         browser.close()
+
+
+@pytest.fixture(scope="module")
+def page(workbench, browser):
+    """A page open on the test module's own `workbench` fixture (modules needing another page define their own)."""
+    from test_workbench_browser import _open
+
+    page = _open(workbench, browser)
+    yield page
+    page.close()

@@ -52,13 +52,6 @@ def workbench(tmp_path_factory) -> Iterator[Workbench]:
     wb.close()
 
 
-@pytest.fixture(scope="module")
-def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
-    page = _open(workbench, browser)
-    yield page
-    page.close()
-
-
 def test_layer_helpers() -> None:
     """Palm colours by how far a grasp got; cost colours cheap to expensive; each wrist's route passes the exchange."""
     colors = grasp_colors(np.array([True, True, False]), np.array([1]))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
 from scipy.spatial.transform import Rotation
-from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _changed, _free_port, _open, _settled, _until_changed, _view, _wait_for
+from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _changed, _free_port, _settled, _until_changed, _view, _wait_for
 
 from planner.motion.result import PHASES, Motion
 from planner.session import Session
@@ -50,13 +50,6 @@ def workbench(folder: Path) -> Iterator[Workbench]:
         layer.visible = name == "motion"  # the roadmap's thousands of edges take software WebGL seconds a frame
     yield wb
     wb.close()
-
-
-@pytest.fixture(scope="module")
-def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
-    page = _open(workbench, browser)
-    yield page
-    page.close()
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,8 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from playwright.sync_api import Browser, Page
-from test_workbench_browser import CHANGED, EXAMPLE, _changed, _free_port, _open, _settled, _until_changed, _view, _wait_for
+from playwright.sync_api import Page
+from test_workbench_browser import CHANGED, EXAMPLE, _changed, _free_port, _settled, _until_changed, _view, _wait_for
 
 from planner.roadmap.build import wrist_positions
 from workbench.app import Workbench
@@ -23,13 +23,6 @@ def workbench(tmp_path_factory) -> Iterator[Workbench]:
     wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=folder.parent)
     yield wb
     wb.close()
-
-
-@pytest.fixture(scope="module")
-def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
-    page = _open(workbench, browser)
-    yield page
-    page.close()
 
 
 @pytest.fixture(scope="module")

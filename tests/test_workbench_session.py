@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _free_port, _open, _settled, _until_changed, _view, _wait_for
+from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _free_port, _settled, _until_changed, _view, _wait_for
 
 from planner.errors import RegraspError
 from planner.paths import DEFAULT_TASK
@@ -58,13 +58,6 @@ def workbench(sessions_dir: Path, example: Session) -> Iterator[Workbench]:
     wb = Workbench(None, "127.0.0.1", _free_port(), session=sessions_dir / "example", sessions_dir=sessions_dir)
     yield wb
     wb.close()
-
-
-@pytest.fixture(scope="module")
-def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
-    page = _open(workbench, browser)
-    yield page
-    page.close()
 
 
 @pytest.mark.browser
