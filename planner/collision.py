@@ -271,6 +271,6 @@ class CollisionChecker:
         """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
         gd, _ = self._subset(subset)
         pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
-        objs, pairs = self.cm.geometry.geometryObjects, self.cm.geometry.collisionPairs
-        return [(objs[pairs[int(k)].first].name, objs[pairs[int(k)].second].name)
-                for k in self.cm.subsets[subset] if gd.collisionResults[int(k)].isCollision()]
+        objs, pairs, results = self.cm.geometry.geometryObjects, self.cm.geometry.collisionPairs, gd.collisionResults
+        hits = [int(k) for k in self.cm.subsets[subset] if results[int(k)].isCollision()]
+        return [(objs[pairs[k].first].name, objs[pairs[k].second].name) for k in hits]

@@ -153,3 +153,73 @@ def test_rrt_reconnects_what_the_graph_cannot(example):
     assert len(graph.edges) > edges_before + 16, "the reconnection's path joined the graph"
     assert np.allclose(path[0], q_start) and np.allclose(path[-1], q_goal)
     assert validity.path_valid(path) and all(space.holds(q) for q in path)
+
+
+@pytest.mark.slow
+def test_lazy_transit_goes_around_with_the_carried_object(example):
+    """The object carried by a hand, hanging far out of its palm: the path the graph returns for the robot alone sweeps it
+    through something, the lazy search invalidates what it hits and goes around, and the independent check (URDF meshes
+    and the carried object with python-fcl, every segment at ten times the resolution of the object's pairs) finds the
+    new path free."""
+    import pinocchio as pin
+
+    from planner.collision import build_collision_model
+    from planner.geometry import coal_mesh
+    from planner.motion.graph import MotionGraph
+    from planner.motion.situation import Situation, situation_model
+    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+    from planner.motion.validity import make_validity, transit_profile
+
+    scene, roadmap, _ = example
+    robot = scene.robot
+    arm = robot.spec.arm_names[0]
+    cm = build_collision_model(robot, scene.environment)
+    idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
+    profile = transit_profile(roadmap.resolution, 0.02, 0.008)
+    shape = coal_mesh(scene.object_mesh)
+    oracle = Oracle(scene)
+    data = robot.model.createData()
+    palm_frame = robot.frame_id(robot.palm_frame(arm))
+
+    def palm(q):
+        pin.framesForwardKinematics(robot.model, data, q)
+        return data.oMf[palm_frame].homogeneous
+
+    big = int(np.bincount(roadmap.node_component).argmax())
+    nodes = np.flatnonzero(roadmap.node_component == big)
+    q_start = scene.q_initial
+    space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
+    free = make_validity(situation_model(cm, shape, Situation(None, _far()), (), idx), profile, "moving")
+    # a goal the graph is searched for, the path for the robot alone, and a hold (the object 25 cm out of the palm along
+    # one of its axes) free at both ends but hit along that path
+    chosen = None
+    for goal_node in nodes[np.argsort(-space.distance(roadmap.node_q[nodes], q_start))][:400]:
+        q_goal = roadmap.node_q[goal_node]
+        if free.motion_valid(q_start, q_goal):
+            continue  # a straight line: the graph is not searched
+        alone = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TransitParams(), np.random.default_rng(0),
+                            TransitStats()).query(q_start, q_goal)
+        for axis in np.vstack([np.eye(3), -np.eye(3)]):
+            hold = np.eye(4)
+            hold[:3, 3] = -0.25 * axis  # palm in the object's frame: the object 25 cm along `axis` from the palm
+            carried = lambda q, hold=hold: palm(q) @ np.linalg.inv(hold)  # noqa: E731
+            if any(oracle.collisions(q, carried(q), arm, None, False) for q in (q_start, q_goal)):
+                continue
+            if any(oracle.collisions(q, carried(q), arm, None, False) for a, b in zip(alone[:-1], alone[1:]) for q in np.linspace(a, b, 5)):
+                chosen = q_goal, hold, carried, alone
+                break
+        if chosen:
+            break
+    assert chosen, "no goal and hold whose object-free path sweeps the carried object through something"
+    q_goal, hold, carried, alone = chosen
+    validity = make_validity(situation_model(cm, shape, Situation(arm, hold), (), idx), profile, "moving")
+    assert validity.state_valid(q_start) and validity.state_valid(q_goal)
+    stats = TransitStats()
+    path = LazyTransit(MotionGraph(roadmap), space, validity.on("changed"), validity, validity, TransitParams(),
+                       np.random.default_rng(0), stats).query(q_start, q_goal)
+    assert stats.edges_invalidated + stats.rrt_calls > 0, "the carried object must have cut the robot-alone path"
+    assert np.allclose(path[0], q_start) and np.allclose(path[-1], q_goal)
+    for a, b in zip(path[:-1], path[1:]):
+        for s in np.linspace(0, 1, 10 * validity.samples(a, b, "object")):
+            q = a + s * (b - a)
+            assert not oracle.collisions(q, carried(q), arm, None, False), f"the carried object hits something at s={s:.3f}"

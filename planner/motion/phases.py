@@ -15,7 +15,7 @@ part.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import coal
@@ -26,13 +26,14 @@ from ..arm_ik import ArmIK
 from ..collision import CollisionModel
 from ..geometry import coal_mesh, transform3s
 from ..reach import approach_direction
+from ..roadmap.local_planner import geometry_radii
 from ..task import Scene
 from .graph import MotionGraph
 from .result import PHASES
 from .situation import Situation, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
-from .validity import Profile, clearances, fitted, make_validity
+from .validity import Profile, Validity, clearances, fitted, make_validity
 
 
 @dataclass(frozen=True)
@@ -47,9 +48,17 @@ class Piece:
 
 
 class PieceFailed(Exception):
-    def __init__(self, phase: int, part: str, why: str):
-        super().__init__(f"{PHASES[phase]} phase, {part}: {why}")
-        self.phase, self.part = phase, part
+    """A piece that cannot be made; `why` may be a function, called only when the message is read (naming the
+    colliding pairs takes a full check, and most failures are of candidates that are never reported)."""
+
+    def __init__(self, phase: int, part: str, why: str | Callable[[], str]):
+        super().__init__(phase, part)
+        self.phase, self.part, self._why = phase, part, why
+
+    def __str__(self) -> str:
+        if callable(self._why):
+            self._why = self._why()
+        return f"{PHASES[self.phase]} phase, {self.part}: {self._why}"
 
 
 @dataclass(frozen=True)
@@ -78,6 +87,9 @@ class PhasePlanner:
         robot = self.robot
         self.transit_idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
         self.open = robot.q_rest
+        self.radii = geometry_radii(cm)
+        self.models: dict[tuple, CollisionModel] = {}
+        self.validities: dict[tuple, Validity] = {}
 
     # ----- kinematics
     def palm(self, q: np.ndarray, arm: str) -> np.ndarray:
@@ -142,26 +154,28 @@ class PhasePlanner:
             for path in paths:
                 yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
 
-    def first(self, phase: int, part: str, candidates: Iterator, build) -> list[Piece]:
-        """The pieces `build` makes of the first candidate for which it raises no PieceFailed."""
-        failure = None
-        for candidate in candidates:
-            try:
-                return build(candidate)
-            except PieceFailed as exc:
-                failure = exc
-        raise failure or PieceFailed(phase, part, "the arm cannot back its hand off in a straight line")
-
-    def ready(self, q: np.ndarray, situation: Situation, phase: int, part: str) -> None:
-        """PieceFailed unless q keeps the transit clearances in the situation (so a transit can start or end there)."""
+    def ready(self, q: np.ndarray, situation: Situation, phase: int, part: str) -> float:
+        """PieceFailed unless a transit can start or end at q in the situation: checked as a transit checks its ends
+        (the transit paddings fitted to q's clearances), so the transit will accept it. Returns how free q is: the
+        smallest share of a transit padding it keeps beyond the clearance guaranteed (1: as free as a roadmap node, so
+        the transit's checks are as sparse as the roadmap's)."""
         model = self.model(situation, q, self.transit_idx)
         have = clearances(model, q, "moving")
+        end = self.validity(model, fitted(self.transit_profile, have))
+        if not end.state_valid(q):
+            raise PieceFailed(phase, part, lambda: f"ends too near something to start a transit ({_pairs(end.first_collision(q[None]))})")
         t = self.transit_profile
-        if not (have["env"] > t.env_clearance and have["self"] > t.self_clearance and have["object"] > t.object_clearance):
-            raise PieceFailed(phase, part, f"ends too near something to start a transit ({_pairs(self._near(model, q))})")
+        return min(1.0, *((have[k] - keep) / (pad - keep) for k, pad, keep in (
+            ("env", t.env_padding, t.env_clearance), ("self", t.self_padding, t.self_clearance),
+            ("object", t.object_padding, t.object_clearance))))
 
-    def _near(self, model: CollisionModel, q: np.ndarray) -> list[tuple[str, str]]:
-        return make_validity(model, self.transit_profile, "moving").first_collision(q[None])
+    def validity(self, model: CollisionModel, profile: Profile) -> Validity:
+        """The validity of a situation's model over its moving pairs (the robot's displacement radii computed once, one
+        validity per model and profile)."""
+        key = (id(model), profile)
+        if key not in self.validities:
+            self.validities[key] = make_validity(model, profile, "moving", self.radii)
+        return self.validities[key]
 
     def backoff(self, q: np.ndarray, arm: str) -> np.ndarray:
         """World offset that backs the arm's palm off along its approach direction by the pre-grasp distance."""
@@ -187,20 +201,23 @@ class PhasePlanner:
     # ----- validity
     def model(self, situation: Situation, q: np.ndarray, moving: np.ndarray) -> CollisionModel:
         """The situation's collision model; the hands not at the roadmap's open values at q are those whose pairs
-        'changed', and 'moving' has the pairs the coordinates `moving` change."""
+        'changed', and 'moving' has the pairs the coordinates `moving` change (built once per plan for each)."""
         moved = tuple(a for a in self.robot.spec.arm_names
                       if not np.allclose(q[self.robot.hand_idx[a]], self.open[self.robot.hand_idx[a]]))
-        return situation_model(self.cm, self.shape, situation, moved, moving)
+        key = (situation, moved, np.asarray(moving).tobytes())
+        if key not in self.models:
+            self.models[key] = situation_model(self.cm, self.shape, situation, moved, moving)
+        return self.models[key]
 
     def contact(self, phase: int, part: str, path: np.ndarray, situation: Situation, hand: str | None) -> Piece:
         """A short motion near the object, checked with the contact profile."""
         t = time.perf_counter()
         moving = np.flatnonzero(np.ptp(path, axis=0) > 0)
-        validity = make_validity(self.model(situation, path[0], moving), self.contact_profile, "moving")
+        validity = self.validity(self.model(situation, path[0], moving), self.contact_profile)
         ok = validity.path_valid(path)
         self.stats[phase].seconds_contact += time.perf_counter() - t
         if not ok:
-            raise PieceFailed(phase, part, f"collides ({_pairs(validity.first_collision(path))})")
+            raise PieceFailed(phase, part, lambda: f"collides ({_pairs(validity.first_collision(path))})")
         return Piece(phase, part, np.asarray(path), situation, hand)
 
     def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
@@ -219,16 +236,15 @@ class PhasePlanner:
         model = self.model(situation, q_start, self.transit_idx)
         ends = [clearances(model, q, "moving") for q in (q_start, q_goal)]
         profile = fitted(self.transit_profile, {k: min(e[k] for e in ends) for k in ends[0]})
-        near = make_validity(model, profile, "moving")  # what touches the ends: as dense as they need
-        full = near if profile == self.transit_profile else make_validity(model, self.transit_profile, "moving")
+        near = self.validity(model, profile)  # what touches the ends: as dense as they need
+        full = near if profile == self.transit_profile else self.validity(model, self.transit_profile)
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not near.state_valid(q):
                 raise PieceFailed(phase, "transit", f"its {name} configuration collides ({_pairs(near.first_collision(q[None]))})")
         stats = self.stats[phase]
         try:
             if self.baseline:
-                full = near  # a single query cannot tell the ends' neighbourhood from the rest: it checks as densely
-                path = rrt_transit(space, near, q_start, q_goal, self.transit_params, self.rng, stats)
+                path = rrt_transit(space, full, near, q_start, q_goal, self.transit_params, self.rng, stats)
             else:
                 path = LazyTransit(self.graph, space, full.on("changed"), full, near, self.transit_params, self.rng,
                                    stats).query(q_start, q_goal)
@@ -241,12 +257,14 @@ class PhasePlanner:
 
     # ----- the task
     def plan(self, q_grasp: np.ndarray, q_exch: np.ndarray, q_place: np.ndarray, a: HandGrasp, b: HandGrasp) -> list[Piece]:
-        """Every piece from q_initial to q_final through the double grasp (a: the picking hand, b: the placing hand)."""
+        """Every piece from q_initial to q_final through the double grasp (a: the picking hand, b: the placing hand).
+
+        The contact motions come first and every transit's ends are checked ready: a double grasp that cannot work
+        fails in a fraction of a second, before any transit is searched. Where a transit fails, the next pre-grasp
+        candidate of that hand is tried."""
         scene, p = self.scene, self.p
         oi, of = scene.object_initial, scene.object_final
         open_a, open_b = (self.open[self.robot.hand_idx[h.arm]] for h in (a, b))
-        up = np.array([0.0, 0.0, p.lift])
-        pieces: list[Piece] = []
 
         # exact grasps, so the object's pose is continuous where it changes hands
         g_a = np.linalg.inv(oi) @ self.palm(q_grasp, a.arm)
@@ -259,36 +277,45 @@ class PhasePlanner:
         tips_a = fingertip_geometries(self.cm, a.arm, a.touching)
         tips_b = fingertip_geometries(self.cm, b.arm, b.touching)
         support_i, support_f = self.supports(oi), self.supports(of)
+        let_a, let_b = self.opened(a, p.release, True), self.opened(b, p.release, True)
 
-        # Grasp
-        let_a = self.opened(a, p.release, True)
-
-        def grasp(shaped: tuple[np.ndarray, np.ndarray]) -> list[Piece]:
+        # Grasp: (pre-grasp, pre-shape + approach + closing) candidates
+        def grasp(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
             pre_a, approach = shaped[0], shaped[1][::-1]
             q_pre = self.with_fingers(approach[0], a.arm, open_a)
             out = [self.contact(0, "approach", approach, static_i, a.arm)]
-            out = [self.transit(0, scene.q_initial, q_pre, static_i)] + self.fingers(0, "pre-shape", q_pre, a.arm, pre_a, static_i) + out
-            return out + self.fingers(0, "closing", approach[-1], a.arm, a.fingers, Situation(None, oi, tips_a))
+            out = self.fingers(0, "pre-shape", q_pre, a.arm, pre_a, static_i) + out
+            out += self.fingers(0, "closing", approach[-1], a.arm, a.fingers, Situation(None, oi, tips_a))
+            self.ready(q_pre, static_i, 0, "pre-grasp")
+            return q_pre, out
 
-        pieces += self.first(0, "pre-grasp", self.shaped(a, self.retreats(q_grasp, a.arm, None, True, 0, "pre-grasp")), grasp)
+        grasps = self.options(0, "pre-grasp", self.shaped(a, self.retreats(q_grasp, a.arm, None, True, 0, "pre-grasp")), grasp)
+        first_grasp = next(grasps)
 
-        # Carry
-        lift = self.straight(pieces[-1].path[-1], a.arm, up, None, 1, "lift")
-        pieces.append(self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i), a.arm))
-        let_b = self.opened(b, p.release, True)
+        # Carry: the lift, (exchange pre-grasp, its approach and closing) candidates, the picking hand letting go and retreating
+        def lift_off(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
+            lift = self.straight(self.with_fingers(q_grasp, a.arm, a.fingers), a.arm, offset, None, 1, "lift")
+            piece = self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i), a.arm)
+            return lift[-1], [piece], self.ready(lift[-1], held_a, 1, "lift")
+
+        q_lifted, lifted, _ = next(freest(self.options(1, "lift", iter(self.lifts(oi, q_grasp, a.arm)), lift_off)))
         q_x = self.with_fingers(q_exch, a.arm, a.fingers)
 
-        def exchange(shaped: tuple[np.ndarray, np.ndarray]) -> list[Piece]:
+        def exchange(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
             pre_b, approach_b = shaped[0], shaped[1][::-1]
             q_pre_b = self.with_fingers(approach_b[0], b.arm, open_b)
             out = [self.contact(1, "approach", approach_b, held_a, b.arm)]
-            out = [self.transit(1, lift[-1], q_pre_b, held_a)] + self.fingers(1, "pre-shape", q_pre_b, b.arm, pre_b, held_a) + out
-            return out + self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
+            out = self.fingers(1, "pre-shape", q_pre_b, b.arm, pre_b, held_a) + out
+            out += self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
+            self.ready(q_pre_b, held_a, 1, "exchange pre-grasp")
+            return q_pre_b, out
 
-        pieces += self.first(1, "exchange pre-grasp", self.shaped(b, self.retreats(q_x, b.arm, a.arm, False, 1, "exchange pre-grasp")),
-                             exchange)
+        exchanges = self.options(1, "exchange pre-grasp", self.shaped(b, self.retreats(q_x, b.arm, a.arm, False, 1, "exchange pre-grasp")),
+                                 exchange)
+        first_exchange = next(exchanges)
         released = Situation(b.arm, g_b, tips_a)
-        pieces += self.fingers(1, "opening", pieces[-1].path[-1], a.arm, let_a, released)
+        q_both = self.with_fingers(q_x, b.arm, b.fingers)
+        let_go_a = self.fingers(1, "opening", q_both, a.arm, let_a, released)
 
         def leave(situation: Situation, after: Situation, phase: int, arm: str):
             def build(retreat: np.ndarray) -> list[Piece]:
@@ -297,25 +324,95 @@ class PhasePlanner:
                 return [piece]
             return build
 
-        pieces += self.first(1, "retreat", self.retreats(pieces[-1].path[-1], a.arm, b.arm, False, 1, "retreat"),
-                             leave(released, held_b, 1, a.arm))
+        q_let = self.with_fingers(q_both, a.arm, let_a)
+        retreat_a = next(self.options(1, "retreat", self.retreats(q_let, a.arm, b.arm, False, 1, "retreat"),
+                                      leave(released, held_b, 1, a.arm)))
 
-        # Place (the picking hand keeps its fingers as they let go until the end: opened near the object, they hit it)
+        # Place: (above the placement, set-down) candidates; the picking hand keeps its fingers as they let go until the
+        # end (opened near the object, they hit it)
         q_down = self.with_fingers(q_place, a.arm, let_a)
-        lower = self.straight(q_down, b.arm, up, None, 2, "above the placement")[::-1]
-        pieces.append(self.transit(2, pieces[-1].path[-1], lower[0], held_b))
-        pieces.append(self.contact(2, "set-down", lower, Situation(b.arm, g_b, (), support_f), b.arm))
+
+        def set_down(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
+            lower = self.straight(q_down, b.arm, offset, None, 2, "above the placement")[::-1]
+            piece = self.contact(2, "set-down", lower, Situation(b.arm, g_b, (), support_f), b.arm)
+            return lower[0], [piece], self.ready(lower[0], held_b, 2, "above the placement")
+
+        downs = freest(self.options(2, "set-down", iter(self.lifts(of, q_place, b.arm)), set_down))
+        first_down = next(downs)
         let_go = Situation(None, of, tips_b)
-        pieces += self.fingers(2, "opening", lower[-1], b.arm, let_b, let_go)
-        pieces += self.first(2, "retreat", self.retreats(pieces[-1].path[-1], b.arm, None, True, 2, "retreat"),
-                             leave(let_go, static_f, 2, b.arm))
+        let_go_b = self.fingers(2, "opening", q_down, b.arm, let_b, let_go)
+        q_let_b = self.with_fingers(q_down, b.arm, let_b)
+        retreat_b = next(self.options(2, "retreat", self.retreats(q_let_b, b.arm, None, True, 2, "retreat"),
+                                      leave(let_go, static_f, 2, b.arm)))
 
         # Rest: to the final configuration, then both hands open
         q_end = self.with_fingers(self.with_fingers(scene.q_final, a.arm, let_a), b.arm, let_b)
-        pieces.append(self.transit(3, pieces[-1].path[-1], q_end, static_f))
-        if not np.allclose(q_end, scene.q_final):
-            pieces.append(self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f, None))
-        return pieces
+        self.ready(q_end, static_f, 3, "final configuration")
+        opening = [] if np.allclose(q_end, scene.q_final) else [
+            self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f, None)]
+
+        # the transits
+        pieces = self.reach(0, scene.q_initial, grasps, first_grasp, static_i)
+        pieces += lifted + self.reach(1, q_lifted, exchanges, first_exchange, held_a) + let_go_a + retreat_a
+        pieces += self.reach(2, retreat_a[-1].path[-1], downs, first_down, held_b) + let_go_b + retreat_b
+        return pieces + [self.transit(3, retreat_b[-1].path[-1], q_end, static_f)] + opening
+
+    def lifts(self, pose: np.ndarray, q: np.ndarray, arm: str) -> list[np.ndarray]:
+        """World offsets to lift the object at `pose`, held by `arm` at q, off its support (reversed: to set it down
+        there), freest first: up, then tilted 30°, 55° and 75° from the vertical in eight directions, each by the lift
+        distance and twice as far, ordered by the clearance of the object and the hand from the obstacles at the
+        offset's end (counted up to the transit padding: farther gains nothing, so the vertical lift comes first when
+        it is free)."""
+        dirs = [np.array([0.0, 0.0, 1.0])]
+        for tilt in np.radians([30.0, 55.0, 75.0]):
+            dirs += [np.array([np.sin(tilt) * np.cos(a), np.sin(tilt) * np.sin(a), np.cos(tilt)])
+                     for a in np.radians(np.arange(0.0, 360.0, 45.0))]
+        offsets = [scale * self.p.lift * d for scale in (1.0, 2.0) for d in dirs]
+        gm = self.cm.geometry
+        gd = pin.GeometryData(gm)
+        pin.updateGeometryPlacements(self.robot.model, self.data, gm, gd, q)
+        hand = [g for g in range(self.cm.n_robot_geoms) if self.cm.parts[g] == f"{arm}_hand"]
+        bodies = [(self.shape, pose)] + [(gm.geometryObjects[g].geometry, gd.oMg[g].homogeneous) for g in hand]
+        obstacles = [(ob.coal_shape(), transform3s(ob.pose)) for ob in self.scene.environment]
+        req, res = coal.DistanceRequest(), coal.DistanceResult()
+
+        def clearance(offset: np.ndarray) -> float:
+            out = self.transit_profile.env_padding
+            for shape, placed in bodies:
+                moved = placed.copy()
+                moved[:3, 3] += offset
+                where = transform3s(moved)
+                for obstacle, at in obstacles:
+                    res.clear()
+                    out = min(out, coal.distance(shape, where, obstacle, at, req, res))
+            return out
+
+        free = [clearance(o) for o in offsets]
+        return [offsets[i] for i in sorted(range(len(offsets)), key=lambda i: -free[i])][: self.p.lift_candidates]
+
+    def options(self, phase: int, part: str, candidates: Iterator, build) -> Iterator:
+        """What `build` makes of each candidate for which it raises no PieceFailed, in order; past the last, the last
+        failure is raised."""
+        failure = None
+        for candidate in candidates:
+            try:
+                yield build(candidate)
+            except PieceFailed as exc:
+                failure = exc
+        raise failure or PieceFailed(phase, part, "the arm cannot back its hand off in a straight line")
+
+    def reach(self, phase: int, q_start: np.ndarray, options: Iterator, option: tuple, situation: Situation) -> list[Piece]:
+        """A transit from q_start to the first option ((where the transit ends, pieces from there, ...), in order) it
+        can reach, then its pieces."""
+        while True:
+            q_to, after = option[:2]
+            try:
+                return [self.transit(phase, q_start, q_to, situation)] + after
+            except PieceFailed as failed:
+                try:
+                    option = next(options)
+                except (PieceFailed, StopIteration):
+                    raise failed from None
 
     def supports(self, pose: np.ndarray) -> tuple[str, ...]:
         """Obstacles within 5 mm of the object at a placement: what it rests on."""
@@ -326,6 +423,22 @@ class PhasePlanner:
             if coal.distance(self.shape, transform3s(pose), ob.coal_shape(), transform3s(ob.pose), req, res) < 0.005:
                 out.append(ob.name)
         return tuple(out)
+
+
+def freest(options: Iterator[tuple]) -> Iterator[tuple]:
+    """Options ((q, pieces, freedom) with freedom as `ready` gives it) in order while they are fully free, the others
+    after them, freest first: a transit from a free end checks sparsely and leaves it easily."""
+    held = []
+    try:
+        for option in options:
+            if option[2] >= 1.0:
+                yield option
+            else:
+                held.append(option)
+    except PieceFailed:
+        if not held:
+            raise
+    yield from sorted(held, key=lambda o: -o[2])
 
 
 def _pairs(pairs: list[tuple[str, str]], most: int = 3) -> str:

@@ -106,8 +106,9 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
                 state_valid: StateValid,
                 motion_valid: MotionValid,
                 start: np.ndarray, goal: np.ndarray, *, seed: int, time_limit: float = 30.0,
-                range_: float = 0.0) -> RRTResult:
-    """Plan from `start` to `goal` in the box [lower, upper] with OMPL's RRTConnect; the raw path, unsimplified.
+                range_: float = 0.0, more_goals: np.ndarray | None = None) -> RRTResult:
+    """Plan from `start` to `goal` (or to any of `more_goals`, (k, d) valid states: the goal tree grows from each) in the
+    box [lower, upper] with OMPL's RRTConnect; the raw path, unsimplified.
 
     `state_valid(q)` and `motion_valid(a, b)` get numpy copies; `motion_valid` decides whether the
     straight segment a-b is free and must be symmetric (the goal tree asks for its edges from the
@@ -118,6 +119,9 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
     """
     lower, upper, start, goal, seed = _checked_inputs(lower, upper, start, goal, seed, time_limit, range_)
     d = lower.size
+    goals = np.concatenate([goal[None], np.zeros((0, d)) if more_goals is None else np.asarray(more_goals, dtype=float)])
+    if goals.ndim != 2 or goals.shape[1] != d or not np.all((goals >= lower) & (goals <= upper)):
+        raise ValueError(f"more_goals must be (k, {d}) states within the bounds")
     if not state_valid(start.copy()):
         return RRTResult(False, _frozen(np.empty((0, d))), 0, 0.0, "start invalid")
     if not state_valid(goal.copy()):
@@ -139,11 +143,16 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
         si.setMotionValidator(_CallableMotionValidator(si, d, state_valid, motion_valid))
         si.setup()
 
-        start_state, goal_state = si.allocState(), si.allocState()
+        start_state = si.allocState()
         start_state[0:d] = start.tolist()
-        goal_state[0:d] = goal.tolist()
+        goal_set = ob.GoalStates(si)
+        for g in goals:
+            state = si.allocState()
+            state[0:d] = g.tolist()
+            goal_set.addState(state)
         pdef = ob.ProblemDefinition(si)
-        pdef.setStartAndGoalStates(start_state, goal_state)
+        pdef.addStartState(start_state)
+        pdef.setGoal(goal_set)
         planner = og.RRTConnect(si)
         planner.setRange(float(range_))
         planner.setProblemDefinition(pdef)

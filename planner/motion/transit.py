@@ -1,15 +1,16 @@
 """Transit motions (paper V-B): the Super Graph query with lazy revalidation, RRT reconnection, then shortcutting.
 
-The query connects the start and the goal to their nearest graph nodes and searches the graph
-disregarding the phase (Dijkstra over edges not known invalid). The path found is then validated
-in the phase: roadmap nodes and edges only over the pairs the offline roadmap did not check
-('changed': the object, a hand holding it), edges nobody checked offline (connections, earlier
-reconnections) over every pair. Invalid edges are marked and the search runs again. When the
-graph cannot join the two ends any more, the collision-free configurations bounding the invalid
-portion of the last path (or, when no path was ever found, the closest valid nodes of the start's
-and the goal's components) are reconnected with OMPL's RRTConnect, and its path is added to the
-graph, as the paper enriches its PRM with RRT trees. The single-query baseline (`rrt_transit`) runs
-RRTConnect alone between the same ends.
+The query joins the start and the goal to their nearest graph nodes (checked: the ends are where a
+phase differs most from the roadmap) and searches the graph disregarding the phase (Dijkstra over
+edges not known invalid). The path found is then validated in the phase from both ends inward,
+each side stopping at its first invalid edge: roadmap nodes and edges only over the pairs the
+offline roadmap did not check ('changed': the object, a hand holding it), edges nobody checked
+offline (connections, earlier reconnections) over every pair. Invalid elements are marked and the
+search runs again. When the searches are used up, the valid nodes bounding the invalid span of the
+last path are reconnected with OMPL's RRTConnect; when the graph cannot join the ends at all, the
+end whose component is smaller is reconnected to the nearest valid nodes of the other (the goal
+tree grows from each). What RRTConnect finds is added to the graph, as the paper enriches its PRM
+with RRT trees. The single-query baseline (`rrt_transit`) runs RRTConnect alone between the ends.
 """
 from __future__ import annotations
 
@@ -26,14 +27,15 @@ from .validity import MotionValidity
 
 @dataclass(frozen=True)
 class TransitParams:
-    connections: int = 8  # graph nodes each end is joined to (nearest first) ...
-    max_connections: int = 48  # ... and more, a batch at a time, while all its edges are invalid
+    connections: int = 8  # valid edges joining each query end to the graph (nearest nodes first) ...
+    max_connections: int = 48  # ... among at most this many nearest nodes tried
     max_searches: int = 60  # searches after invalidations before giving up
-    max_reconnections: int = 4  # RRTConnect calls per transit
-    reconnect_time: float = 5.0  # s per RRTConnect reconnection
+    max_reconnections: int = 2  # RRTConnect calls per transit
+    reconnect_time: float = 1.5  # s per RRTConnect reconnection
     rrt_time: float = 30.0  # s per RRTConnect query of the baseline
     rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension)
     shortcut_attempts: int = 24
+    goal_nodes: int = 16  # reconnecting an end cut off from the graph: valid graph nodes nearest it the tree may reach
 
 
 @dataclass
@@ -57,11 +59,13 @@ class TransitFailed(Exception):
 
 def _rrt(space: JointSpace, full: MotionValidity, qa: np.ndarray, qb: np.ndarray, seed: int, time_limit: float,
          step: float) -> np.ndarray | None:
-    """RRTConnect between two full configurations of the space with full validity, extending by at most `step` (joint-space
-    distance; short steps keep each motion check cheap); the path as full configurations."""
+    """RRTConnect from a full configuration of the space to another (or to any row of qb) with the given validity,
+    extending by at most `step` (joint-space distance; short steps keep each motion check cheap); the path as full
+    configurations."""
+    goals = space.reduce(np.atleast_2d(qb))
     result = rrt_connect(space.lower, space.upper, lambda x: full.state_valid(space.full(x)),
                          lambda a, b: full.motion_valid(space.full(a), space.full(b), ends=False),
-                         space.reduce(qa), space.reduce(qb), seed=seed, time_limit=time_limit, range_=step)
+                         space.reduce(qa), goals[0], seed=seed, time_limit=time_limit, range_=step, more_goals=goals[1:])
     return space.full(result.path) if result.found else None
 
 
@@ -75,7 +79,6 @@ class LazyTransit:
             graph, space, lazy, full, near, params, rng, stats
         self.ends: tuple[int, ...] = ()
         self.status = PhaseStatus(graph)
-        self.joined: dict[int, int] = {}  # query end -> how many nearest nodes it was joined to
 
     def _config(self, node: int) -> np.ndarray:
         """A graph node as a configuration of this phase (its hands as the phase holds them)."""
@@ -85,33 +88,20 @@ class LazyTransit:
         e = self.graph.edges
         return self.space.distance(self.graph.q[e[:, 0]], self.graph.q[e[:, 1]])
 
-    def _connect(self, q: np.ndarray) -> int:
-        """Add q as a node joined (unchecked) to its nearest nodes; returns its id."""
-        node = int(self.graph.add_nodes(q)[0])
-        self.joined[node] = 0
-        self._join(node)
-        self.stats.nodes_planning += 1
-        return node
-
-    def _join(self, node: int) -> None:
-        """Join a query end (unchecked) to its next `connections` nearest nodes."""
-        d = self.space.distance(self.graph.q, self.graph.q[node])
-        d[node] = np.inf
-        order = np.argsort(d, kind="stable")
-        k = self.joined[node]
-        self.graph.add_edges([(node, int(n)) for n in order[k: k + self.p.connections]])
-        self.joined[node] = k + self.p.connections
-        self.status.grow()
-
-    def _widen(self, node: int) -> bool:
-        """When every edge of a query end is known invalid, join it to its next nearest nodes (up to
-        `max_connections`); True if it was widened."""
-        g = self.graph
-        mine = (g.edges[:, 0] == node) | (g.edges[:, 1] == node)
-        if np.any(self.status.usable() & mine) or self.joined[node] >= self.p.max_connections:
-            return False
-        self._join(node)
-        return True
+    def _connect(self, node: int) -> None:
+        """Join a query end to its nearest graph nodes, nearest first, checking each node and edge, until `connections`
+        valid edges join it or `max_connections` nodes were tried (the ends are where a phase differs most from the
+        roadmap: joined unchecked, the end's edges would be invalidated one search at a time)."""
+        g, st = self.graph, self.status
+        d = self.space.distance(g.q[: g.n_roadmap], g.q[node])
+        joined = 0
+        for n in np.argsort(d, kind="stable")[: self.p.max_connections]:
+            if joined >= self.p.connections:
+                break
+            if self._node_valid(int(n)):
+                g.add_edges([(node, int(n))])
+                st.grow()
+                joined += self._edge_valid(node, int(n))
 
     def _node_valid(self, n: int) -> bool:
         st = self.status
@@ -130,26 +120,43 @@ class LazyTransit:
             self.stats.edges_invalidated += int(not ok)
         return st.edge[k] == VALID
 
-    def _validate(self, path: list[int]) -> list[bool]:
-        """Per edge of the path: valid (its ends and itself); every element of the path is checked (cached)."""
-        nodes_ok = [self._node_valid(n) for n in path]
-        return [nodes_ok[i] and nodes_ok[i + 1] and self._edge_valid(path[i], path[i + 1]) for i in range(len(path) - 1)]
+    def _invalid_span(self, path: list[int]) -> tuple[int, int] | None:
+        """(first, last) invalid edge of the path (an edge is invalid with either end), checked from both ends inward,
+        where a phase differs most from the roadmap, each side stopping at its first invalid edge; None if all valid."""
+        def edge_ok(i: int) -> bool:
+            return self._node_valid(path[i]) and self._node_valid(path[i + 1]) and self._edge_valid(path[i], path[i + 1])
 
-    def _bounds(self, path: list[int] | None, start: int, goal: int) -> tuple[int, int]:
-        """The valid nodes to reconnect: around the invalid portion of the last path, else the closest valid pair
-        of the start's and the goal's components."""
-        if path is not None:
-            ok = self._validate(path)
-            first, last = ok.index(False), len(ok) - 1 - ok[::-1].index(False)
-            return path[first], path[last + 1]
+        front, back = 0, len(path) - 2
+        first = last = None
+        while front <= back and (first is None or last is None):
+            if first is None:
+                if edge_ok(front):
+                    front += 1
+                else:
+                    first = front
+            if last is None and front <= back:
+                if edge_ok(back):
+                    back -= 1
+                else:
+                    last = back
+        return None if first is None else (first, first if last is None else last)
+
+    def _reconnection(self, last: tuple[list[int], tuple[int, int]] | None, start: int, goal: int) -> tuple[int, list[int]]:
+        """The valid node a reconnection starts from and the valid nodes it may end at: across the invalid span of the
+        last path; else (the ends' components apart) from the end whose component is smaller to the valid nodes of the
+        other component nearest it, so the tree joins the graph wherever it reaches it first."""
+        if last is not None:
+            path, (first, final) = last
+            return path[first], [path[final + 1]]
         comp = self.status.components()
-        a_ids, b_ids = np.flatnonzero(comp == comp[start]), np.flatnonzero(comp == comp[goal])
-        d = np.linalg.norm(self.space.reduce(self.graph.q[a_ids])[:, None] - self.space.reduce(self.graph.q[b_ids])[None], axis=2)
-        for flat in np.argsort(d, axis=None, kind="stable")[:50]:
-            a, b = int(a_ids[flat // len(b_ids)]), int(b_ids[flat % len(b_ids)])
-            if self._node_valid(a) and self._node_valid(b):
-                return a, b
-        return start, goal
+        size = np.bincount(comp)
+        root, other = (start, goal) if size[comp[start]] <= size[comp[goal]] else (goal, start)
+        ids = np.flatnonzero((comp == comp[other]) & (self.status.node != INVALID))
+        goals: list[int] = []
+        for n in ids[np.argsort(self.space.distance(self.graph.q[ids], self.graph.q[root]), kind="stable")][: 3 * self.p.goal_nodes]:
+            if len(goals) < self.p.goal_nodes and self._node_valid(int(n)):
+                goals.append(int(n))
+        return root, goals or [other]
 
     def query(self, q_start: np.ndarray, q_goal: np.ndarray) -> np.ndarray:
         """A valid polyline (full configurations) from q_start to q_goal; both ends must be valid states."""
@@ -158,41 +165,45 @@ class LazyTransit:
         if self.near.motion_valid(q_start, q_goal, ends=False):
             stats.seconds_planning += time.perf_counter() - t0
             return np.stack([q_start, q_goal])
-        start, goal = self._connect(q_start), self._connect(q_goal)
+        start, goal = (int(n) for n in self.graph.add_nodes(np.stack([q_start, q_goal])))
         self.ends = (start, goal)
         self.status.grow()
         self.status.node[[start, goal]] = VALID
+        self._connect(start)
+        self._connect(goal)
+        stats.nodes_planning += 2
         stats.seconds_planning += time.perf_counter() - t0
-        last: list[int] | None = None
+        last: tuple[list[int], tuple[int, int]] | None = None
         weights = self._weights()
+        searches = reconnections = 0  # this query's (stats sum a phase's queries)
+        invalidated = stats.edges_invalidated
         for _ in range(self.p.max_searches + self.p.max_reconnections):
             t = time.perf_counter()
             path = self.status.shortest_path(weights, start, goal)
             stats.searches += 1
+            searches += 1
             stats.seconds_planning += time.perf_counter() - t
             t = time.perf_counter()
             if path is not None:
-                ok = self._validate(path)
+                span = self._invalid_span(path)
                 stats.seconds_validating += time.perf_counter() - t
-                if all(ok):
+                if span is None:
                     return np.array([self._config(n) for n in path])
-                last = path
-                if stats.searches < self.p.max_searches:
+                last = (path, span)
+                if searches < self.p.max_searches:
                     continue
-            if stats.rrt_calls >= self.p.max_reconnections:
+            if reconnections >= self.p.max_reconnections:
                 break
-            if self._widen(start) | self._widen(goal):
-                weights = self._weights()
-                stats.seconds_validating += time.perf_counter() - t
-                continue
-            a, b = self._bounds(last, start, goal)
+            a, targets = self._reconnection(last, start, goal)
             stats.rrt_calls += 1
-            check = self.near if a in self.ends or b in self.ends else self.full
-            found = _rrt(self.space, check, self._config(a), self._config(b), int(self.rng.integers(2**31)), self.p.reconnect_time,
-                         self.p.rrt_step)
+            reconnections += 1
+            check = self.near if {a, *targets} & set(self.ends) else self.full
+            found = _rrt(self.space, check, self._config(a), np.array([self._config(n) for n in targets]),
+                         int(self.rng.integers(2**31)), self.p.reconnect_time, self.p.rrt_step)
             if found is not None:
                 ids = self.graph.add_nodes(found[1:-1])
-                chain = [a, *ids.tolist(), b]
+                reached = self.space.distance(np.array([self._config(n) for n in targets]), found[-1])
+                chain = [a, *ids.tolist(), targets[int(np.argmin(reached))]]
                 self.graph.add_edges(list(zip(chain[:-1], chain[1:])))
                 self.status.grow()
                 self.status.node[ids] = VALID
@@ -202,16 +213,17 @@ class LazyTransit:
                 weights = self._weights()
             last = None
             stats.seconds_validating += time.perf_counter() - t
-        raise TransitFailed(f"no path: {stats.searches} searches, {stats.edges_invalidated} edges invalidated, "
-                            f"{stats.rrt_calls} RRT reconnections")
+        raise TransitFailed(f"no path: {searches} searches, {stats.edges_invalidated - invalidated} edges invalidated, "
+                            f"{reconnections} RRT reconnections")
 
 
-def rrt_transit(space: JointSpace, full: MotionValidity, q_start: np.ndarray, q_goal: np.ndarray, params: TransitParams,
-                rng: np.random.Generator, stats: TransitStats) -> np.ndarray:
-    """The single-query baseline: RRTConnect between the ends, every pair checked."""
+def rrt_transit(space: JointSpace, full: MotionValidity, near: MotionValidity, q_start: np.ndarray, q_goal: np.ndarray,
+                params: TransitParams, rng: np.random.Generator, stats: TransitStats) -> np.ndarray:
+    """The single-query baseline: RRTConnect between the ends, every pair checked, as densely as the ends need (a single
+    query cannot tell their neighbourhood from the rest)."""
     t = time.perf_counter()
     stats.rrt_calls += 1
-    found = _rrt(space, full, q_start, q_goal, int(rng.integers(2**31)), params.rrt_time, params.rrt_step)
+    found = _rrt(space, near, q_start, q_goal, int(rng.integers(2**31)), params.rrt_time, params.rrt_step)
     stats.seconds_planning += time.perf_counter() - t
     if found is None:
         raise TransitFailed(f"RRTConnect found no path within {params.rrt_time:g} s")

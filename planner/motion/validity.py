@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import CollisionModel
-from ..roadmap.local_planner import SegmentChecker, van_der_corput
+from ..roadmap.local_planner import SegmentChecker, geometry_radii, van_der_corput
 
 
 class StateValidity(Protocol):
@@ -100,12 +100,12 @@ class Validity:
 
     def first_collision(self, path: np.ndarray) -> list[tuple[str, str]]:
         """The colliding pairs at the first configuration of a polyline that fails its checks (for messages)."""
+        checker = self.seg.checker
         for a, b in zip(path[:-1], path[1:]):
             for s in van_der_corput(self.samples(a, b)):
-                pairs = self.seg.checker.colliding_pairs(a + s * (b - a), self.subset)
-                if pairs:
-                    return pairs
-        return self.seg.checker.colliding_pairs(path[-1], self.subset)
+                if checker.in_collision(a + s * (b - a), self.subset):
+                    return checker.colliding_pairs(a + s * (b - a), self.subset)
+        return checker.colliding_pairs(path[-1], self.subset)
 
     def path_valid(self, path: np.ndarray) -> bool:
         """Every state and every segment of a polyline."""
@@ -140,8 +140,10 @@ def fitted(profile: Profile, clearance: dict[str, float]) -> Profile:
                                object_padding=fit(profile.object_padding, profile.object_clearance, clearance["object"]))
 
 
-def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all") -> Validity:
-    """A validity of `cm` with the profile's paddings (the model's own are replaced)."""
+def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all", known_radii: np.ndarray | None = None) -> Validity:
+    """A validity of `cm` with the profile's paddings (the model's own are replaced); `known_radii`: the displacement
+    radii of cm's first geometries (geometry_radii of the model a situation extends), so only the object's are computed."""
     cm = dataclasses.replace(cm, params=dataclasses.replace(cm.params, env_padding=profile.env_padding,
                                                             self_padding=profile.self_padding, object_padding=profile.object_padding))
-    return Validity(SegmentChecker(cm, profile.env_clearance, profile.self_clearance, profile.object_clearance), profile, subset)
+    return Validity(SegmentChecker(cm, profile.env_clearance, profile.self_clearance, profile.object_clearance,
+                                   geometry_radii(cm, known_radii)), profile, subset)

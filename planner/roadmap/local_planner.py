@@ -21,8 +21,9 @@ from ..collision import CollisionModel
 from .decomposition import relative_joints
 
 
-def geometry_radii(cm: CollisionModel) -> np.ndarray:
+def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.ndarray:
     """(n_geometries, nq) r_j(g): a bound on the distance from joint j's axis to geometry g (0 unless j moves g).
+    `known`: the rows of the model's first geometries, computed before (a model extended by one more body).
 
     The first offset below j counts only across the axis (rotating about the axis keeps it); the
     rest of the chain counts in full; the geometry's own extent is its farthest hull vertex
@@ -31,8 +32,10 @@ def geometry_radii(cm: CollisionModel) -> np.ndarray:
     model = cm.robot.model
     axes = _axes(model)
     radii = np.zeros((len(cm.geometry.geometryObjects), model.nq))
+    skip = 0 if known is None else len(known)
+    radii[:skip] = known
     for g, obj in enumerate(cm.geometry.geometryObjects):
-        if obj.parentJoint == 0:
+        if g < skip or obj.parentJoint == 0:
             continue  # fixed in the world (obstacles, a static object): no joint moves it
         geom = obj.geometry
         if hasattr(geom, "points"):
@@ -92,10 +95,11 @@ def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, 
 class SegmentChecker:
     """Checks configurations and straight segments against named pair subsets (one per process)."""
 
-    def __init__(self, cm: CollisionModel, env_clearance: float, self_clearance: float = 0.0, object_clearance: float = 0.0):
+    def __init__(self, cm: CollisionModel, env_clearance: float, self_clearance: float = 0.0, object_clearance: float = 0.0,
+                 radii: np.ndarray | None = None):
         self.cm = cm
         self.checker = cm.checker()
-        radii = geometry_radii(cm)
+        radii = geometry_radii(cm) if radii is None else radii
         first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
         second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
         sweep = relative_joints(cm) * (radii[first] + radii[second])
