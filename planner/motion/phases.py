@@ -14,6 +14,7 @@ part.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -33,7 +34,7 @@ from .result import PHASES
 from .situation import Situation, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
-from .validity import Profile, Validity, clearances, fitted, make_validity
+from .validity import Clearances, Profile, Validity, fitted, make_validity
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,7 @@ class PhasePlanner:
         self.radii = geometry_radii(cm)
         self.models: dict[tuple, CollisionModel] = {}
         self.validities: dict[tuple, Validity] = {}
+        self.distances: dict[int, Clearances] = {}
 
     # ----- kinematics
     def palm(self, q: np.ndarray, arm: str) -> np.ndarray:
@@ -160,7 +162,7 @@ class PhasePlanner:
         smallest share of a transit padding it keeps beyond the clearance guaranteed (1: as free as a roadmap node, so
         the transit's checks are as sparse as the roadmap's)."""
         model = self.model(situation, q, self.transit_idx)
-        have = clearances(model, q, "moving")
+        have = self.clearances(model, q)
         end = self.validity(model, fitted(self.transit_profile, have))
         if not end.state_valid(q):
             raise PieceFailed(phase, part, lambda: f"ends too near something to start a transit ({_pairs(end.first_collision(q[None]))})")
@@ -168,6 +170,12 @@ class PhasePlanner:
         return min(1.0, *((have[k] - keep) / (pad - keep) for k, pad, keep in (
             ("env", t.env_padding, t.env_clearance), ("self", t.self_padding, t.self_clearance),
             ("object", t.object_padding, t.object_clearance))))
+
+    def clearances(self, model: CollisionModel, q: np.ndarray) -> dict[str, float]:
+        """A situation's clearances at q over its moving pairs (see validity.Clearances), scratch data kept per model."""
+        if id(model) not in self.distances:
+            self.distances[id(model)] = Clearances(model, "moving")
+        return self.distances[id(model)](q)
 
     def validity(self, model: CollisionModel, profile: Profile) -> Validity:
         """The validity of a situation's model over its moving pairs (the robot's displacement radii computed once, one
@@ -227,33 +235,39 @@ class PhasePlanner:
             return []
         return [self.contact(phase, part, np.stack([q, target]), situation, arm)]
 
-    def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation) -> Piece:
-        """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline)."""
+    def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, arm: str | None = None) -> Piece:
+        """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline);
+        with `arm`, that arm alone, by RRTConnect (the graph's nodes are whole configurations), `part` 'arm away'."""
         robot = self.robot
-        space = JointSpace.of(robot.lower, robot.upper, self.transit_idx, q_start)
+        idx = self.transit_idx if arm is None else robot.arm_idx[arm]
+        space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
         if not space.holds(q_goal):
-            raise ValueError("transit ends must agree on every joint outside the torso and arms")
-        model = self.model(situation, q_start, self.transit_idx)
-        ends = [clearances(model, q, "moving") for q in (q_start, q_goal)]
+            raise ValueError("transit ends must agree on every joint outside the ones it moves")
+        part = "transit" if arm is None else "arm away"
+        model = self.model(situation, q_start, idx)
+        ends = [self.clearances(model, q) for q in (q_start, q_goal)]
         profile = fitted(self.transit_profile, {k: min(e[k] for e in ends) for k in ends[0]})
         near = self.validity(model, profile)  # what touches the ends: as dense as they need
         full = near if profile == self.transit_profile else self.validity(model, self.transit_profile)
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not near.state_valid(q):
-                raise PieceFailed(phase, "transit", f"its {name} configuration collides ({_pairs(near.first_collision(q[None]))})")
+                raise PieceFailed(phase, part, f"its {name} configuration collides ({_pairs(near.first_collision(q[None]))})")
         stats = self.stats[phase]
         try:
-            if self.baseline:
+            if arm is not None:
+                limit = dataclasses.replace(self.transit_params, rrt_time=self.transit_params.reconnect_time)
+                path = rrt_transit(space, full, near, q_start, q_goal, limit, self.rng, stats)
+            elif self.baseline:
                 path = rrt_transit(space, full, near, q_start, q_goal, self.transit_params, self.rng, stats)
             else:
                 path = LazyTransit(self.graph, space, full.on("changed"), full, near, self.transit_params, self.rng,
                                    stats).query(q_start, q_goal)
         except TransitFailed as exc:
-            raise PieceFailed(phase, "transit", str(exc)) from exc
+            raise PieceFailed(phase, part, str(exc)) from exc
         t = time.perf_counter()
         path = shortcut(path, full, near, self.rng, self.transit_params.shortcut_attempts)
         stats.seconds_shortcut += time.perf_counter() - t
-        return Piece(phase, "transit", path, situation)
+        return Piece(phase, part, path, situation)
 
     # ----- the task
     def plan(self, q_grasp: np.ndarray, q_exch: np.ndarray, q_place: np.ndarray, a: HandGrasp, b: HandGrasp) -> list[Piece]:
@@ -354,8 +368,24 @@ class PhasePlanner:
         # the transits
         pieces = self.reach(0, scene.q_initial, grasps, first_grasp, static_i)
         pieces += lifted + self.reach(1, q_lifted, exchanges, first_exchange, held_a) + let_go_a + retreat_a
-        pieces += self.reach(2, retreat_a[-1].path[-1], downs, first_down, held_b) + let_go_b + retreat_b
+        pieces += self.away(retreat_a[-1].path[-1], a.arm, q_place, held_b)
+        pieces += self.reach(2, pieces[-1].path[-1], downs, first_down, held_b) + let_go_b + retreat_b
         return pieces + [self.transit(3, retreat_b[-1].path[-1], q_end, static_f)] + opening
+
+    def away(self, q: np.ndarray, arm: str, q_place: np.ndarray, situation: Situation) -> list[Piece]:
+        """The picking arm alone from its retreat to where it is at the placement, else to where it is at the end (so
+        the object, held by the other hand, is free of it before the Place transit begins, and that transit starts
+        where the graph is valid); nothing when neither motion is found quickly (the Place transit moves both arms)."""
+        idx = self.robot.arm_idx[arm]
+        for there in (q_place, self.scene.q_final):
+            target = q.copy()
+            target[idx] = there[idx]
+            try:
+                self.ready(target, situation, 2, "arm away")
+                return [self.transit(2, q, target, situation, arm)]
+            except PieceFailed:
+                continue
+        return []
 
     def lifts(self, pose: np.ndarray, q: np.ndarray, arm: str) -> list[np.ndarray]:
         """World offsets to lift the object at `pose`, held by `arm` at q, off its support (reversed: to set it down

@@ -112,20 +112,29 @@ class Validity:
         return all(self.state_valid(q) for q in path) and all(self.motion_valid(a, b, ends=False) for a, b in zip(path[:-1], path[1:]))
 
 
-def clearances(cm: CollisionModel, q: np.ndarray, subset: str) -> dict[str, float]:
-    """The smallest distance at q of the subset's pairs with an obstacle ('env'), robot–object pairs ('object') and
-    robot–robot pairs ('self'); inf for a kind the subset lacks."""
-    gd = pin.GeometryData(cm.geometry)
-    active = np.zeros(len(cm.geometry.collisionPairs), dtype=bool)
-    active[cm.subsets[subset]] = True
-    for k in np.flatnonzero(~active):
-        gd.deactivateCollisionPair(int(k))
-    pin.computeDistances(cm.robot.model, cm.robot.model.createData(), cm.geometry, gd, q)
-    distance = np.array([r.min_distance for r in gd.distanceResults])
-    kind = np.full(len(distance), "self", dtype=object)
-    kind[cm.subsets["env"]] = "env"
-    kind[cm.subsets.get("object", [])] = "object"
-    return {k: float(distance[active & (kind == k)].min(initial=np.inf)) for k in ("env", "self", "object")}
+class Clearances:
+    """The smallest distance at a configuration of a subset's pairs with an obstacle ('env'), robot–object pairs
+    ('object') and robot–robot pairs ('self'), inf for a kind the subset lacks; scratch data built once per model."""
+
+    def __init__(self, cm: CollisionModel, subset: str):
+        self.cm = cm
+        self.data = cm.robot.model.createData()
+        self.gd = pin.GeometryData(cm.geometry)
+        self.pairs = np.asarray(cm.subsets[subset], dtype=np.int64)
+        active = np.zeros(len(cm.geometry.collisionPairs), dtype=bool)
+        active[self.pairs] = True
+        for k in np.flatnonzero(~active):
+            self.gd.deactivateCollisionPair(int(k))
+        kind = np.full(len(active), "self", dtype=object)
+        kind[cm.subsets["env"]] = "env"
+        kind[cm.subsets.get("object", [])] = "object"
+        self.kind = kind[self.pairs]
+
+    def __call__(self, q: np.ndarray) -> dict[str, float]:
+        pin.computeDistances(self.cm.robot.model, self.data, self.cm.geometry, self.gd, q)
+        results = self.gd.distanceResults
+        distance = np.array([results[int(k)].min_distance for k in self.pairs])
+        return {k: float(distance[self.kind == k].min(initial=np.inf)) for k in ("env", "self", "object")}
 
 
 def fitted(profile: Profile, clearance: dict[str, float]) -> Profile:
