@@ -152,14 +152,30 @@ class MotionBench:
             phases.append({"phase": name, "success": len(ok) / len(runs),
                            "nodes_planning": _median([r["nodes_planning"] for r in rows]),
                            "nodes_validating": _median([r["nodes_validating"] for r in rows]),
-                           "seconds_planning": _median([r["phase_seconds"][4 * i] for r in runs if r["phase_seconds"]]),
-                           "seconds_validating": _median([r["phase_seconds"][4 * i + 1] for r in runs if r["phase_seconds"]]),
-                           "seconds": _median([sum(r["phase_seconds"][4 * i: 4 * i + 4]) for r in runs if r["phase_seconds"]]),
+                           "seconds_planning": _median([r["phase_seconds"][5 * i] for r in runs if r["phase_seconds"]]),
+                           "seconds_validating": _median([r["phase_seconds"][5 * i + 1] for r in runs if r["phase_seconds"]]),
+                           "seconds_reconnecting": _median([r["phase_seconds"][5 * i + 2] for r in runs if r["phase_seconds"]]),
+                           "seconds": _median([sum(r["phase_seconds"][5 * i: 5 * i + 5]) for r in runs if r["phase_seconds"]]),
                            "edges_invalidated": _median([r["edges_invalidated"] for r in rows]),
                            "rrt_calls": _median([r["rrt_calls"] for r in rows]),
                            "path_length": _median([r["path_length"] for r in rows]), "duration": _median([r["duration"] for r in rows])})
         return {"seconds": _median([r["seconds"] for r in runs]), "success": sum(r["success"] for r in runs) / len(runs),
-                "phases": phases}
+                "phases": phases, "where": self.where(planner)}
+
+    def where(self, planner: str) -> dict:
+        """Medians over the seeds of the seconds spent in each kind of work, summed over the phases of the motion found
+        ('other': the double grasps given up before it, and setting up)."""
+        kinds = ("graph search", "validation", "RRT", "shortcutting", "contact motions")
+        rows = {k: [] for k in (*kinds, "timing and sampling", "other")}
+        for r in self.runs[planner]:
+            sec = r["phase_seconds"]
+            if not sec:
+                continue
+            for j, kind in enumerate(kinds):
+                rows[kind].append(sum(sec[5 * i + j] for i in range(len(sec) // 5)))
+            rows["timing and sampling"].append(sec[-1])
+            rows["other"].append(r["seconds"] - sum(sec))
+        return {k: _median(v) for k, v in rows.items()}
 
     def render(self) -> str:
         out = []
@@ -172,6 +188,7 @@ class MotionBench:
                 out.append(f"{r['phase']:<7}{r['nodes_planning']:>11.0f}{r['seconds_planning']:>8.2f}{r['nodes_validating']:>10.0f}"
                            f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['rrt_calls']:>5.0f}{r['seconds']:>9.2f}"
                            f"{r['success']:>8.0%}{r['path_length']:>8.2f}{r['duration']:>9.2f}")
+            out.append("where the time goes (median s): " + ", ".join(f"{k} {v:.2f}" for k, v in s["where"].items()))
             out.append("")
         d = self.to_dict()
         out.append(f"speedup (RRTConnect median / ours): {d['speedup']:.2f}" if d["speedup"] else "speedup: n/a")

@@ -4,9 +4,15 @@ Grasp: transit to the pre-grasp (the picking hand backed off along its approach 
 fingers open), the fingers to their pre-shape, a straight approach, the fingers closing. Carry: the
 object lifted off its support, transit to the exchange with the placing hand at its pre-grasp, its
 approach and closing, then the picking hand letting go (its touching fingers open part way) and
-retreating. Place: transit with the placing hand to above the final placement, set down, let go,
-retreat. Rest: transit to the final configuration, where both hands open fully (opened near the
-object, fingers that wrapped around it would hit it).
+retreating. Place: the picking arm alone away from the object (to where it is at the placement or at
+the end), transit with the placing hand to near the placement, set down, let go, retreat. Rest:
+transit to the final configuration, where both hands open fully (opened near the object, fingers
+that wrapped around it would hit it).
+The object is lifted off and set down along the freest of several directions (vertical first when
+it is free: a lamp may hang over a placement), so that transits start and end where they can leave.
+Every contact motion is made, and every transit end checked, before any transit is searched: a
+double grasp that cannot work is given up in a fraction of a second. Where a transit fails, the next
+candidate end of that hand (pre-grasp, set-down) is tried.
 Straight hand motions are IK waypoints of the arm and the torso; while the other hand holds the
 object, its palm is held still by the same IK, so the object does not move. Every piece is checked
 with the validity of its situation; a piece that fails raises `PieceFailed` naming the phase and the

@@ -22,14 +22,14 @@ class MotionParams:
     max_velocity: float = 1.0  # rad/s: joint speeds are capped here (and by the robot's own limits)
     max_acceleration: float = 2.0  # rad/s^2
     rate: float = 30.0  # Hz: the trajectory's sampling rate
-    connections: int = 8  # transit: valid edges joining each end to the graph (nearest nodes first) ...
+    connections: int = 4  # transit: valid edges joining each end to the graph (nearest nodes first) ...
     max_connections: int = 48  # ... among at most this many nearest nodes tried
     max_searches: int = 60  # transit: graph searches after invalidations before reconnecting
     max_reconnections: int = 2  # transit: RRTConnect calls per query (then the next candidate end is tried)
     reconnect_time: float = 1.5  # s: limit of one RRTConnect reconnection
     rrt_time: float = 30.0  # s: limit of one RRTConnect query of the baseline planner ('rrt')
     rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension, joint-space distance)
-    shortcut_attempts: int = 24  # random shortcuts per transit
+    shortcut_attempts: int = 16  # random shortcuts per transit
     max_double_grasps: int = 6  # double grasps tried, best first
     transit_env_padding: float = 0.03  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's),
     transit_self_padding: float = 0.015  # m: robot-robot and robot-object pairs likewise (both lowered per transit

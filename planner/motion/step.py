@@ -6,6 +6,8 @@ step's session record, never into the result, so the result depends on the input
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pinocchio as pin
 
@@ -66,8 +68,10 @@ def plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasp
         failure = f"no valid motion for any of the {count} double grasps tried: " + "; ".join(
             f"{i + 1}: {why}" for i, why in enumerate(tried)) if count else "no double grasp to move with"
         return _empty(p, robot, tried, resolution, failure), []
+    t = time.perf_counter()
     motion = _sampled(scene, pieces, p, tried, resolution, planner)
-    seconds = [x for s in planner.stats for x in (s.seconds_planning, s.seconds_validating, s.seconds_shortcut, s.seconds_contact)]
+    seconds = [x for s in planner.stats for x in (s.seconds_planning, s.seconds_validating, s.seconds_reconnecting, s.seconds_shortcut,
+                                                   s.seconds_contact)] + [time.perf_counter() - t]
     progress(1.0, f"{motion.duration:.1f} s of motion with double grasp {len(tried)}")
     return motion, seconds
 
@@ -122,11 +126,13 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
     stages = []
     for row in table:
         stages += [{"stage": f"{row['phase']}: transit planning", "count": row["nodes_planning"], "note": f"{row['searches']} searches"},
-                   {"stage": f"{row['phase']}: transit validation", "count": row["nodes_validating"],
-                    "note": f"{row['edges_invalidated']} edges invalidated, {row['rrt_calls']} RRT calls"},
+                   {"stage": f"{row['phase']}: transit validation", "count": row["edges_invalidated"], "note": "edges invalidated"},
+                   {"stage": f"{row['phase']}: RRT reconnection", "count": row["nodes_validating"],
+                    "note": f"nodes added by {row['rrt_calls']} RRTConnect calls"},
                    {"stage": f"{row['phase']}: shortcutting", "count": 0, "note": ""},
                    {"stage": f"{row['phase']}: approach, fingers, lift", "count": 0,
                     "note": f"path {row['path_length']:.2f} rad, {row['duration']:.2f} s"}]
+    stages.append({"stage": "timing and sampling", "count": len(q), "note": f"samples at {p.rate:g} Hz"})
     return Motion(p.planner, len(tried) - 1, tried, table, arms, resolution, stages, "", t, q, phase_arr, np.concatenate(poses),
                   np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64))
 

@@ -27,14 +27,14 @@ from .validity import MotionValidity
 
 @dataclass(frozen=True)
 class TransitParams:
-    connections: int = 8  # valid edges joining each query end to the graph (nearest nodes first) ...
+    connections: int = 4  # valid edges joining each query end to the graph (nearest nodes first) ...
     max_connections: int = 48  # ... among at most this many nearest nodes tried
     max_searches: int = 60  # searches after invalidations before giving up
     max_reconnections: int = 2  # RRTConnect calls per transit
     reconnect_time: float = 1.5  # s per RRTConnect reconnection
     rrt_time: float = 30.0  # s per RRTConnect query of the baseline
     rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension)
-    shortcut_attempts: int = 24
+    shortcut_attempts: int = 16
     goal_nodes: int = 16  # reconnecting an end cut off from the graph: valid graph nodes nearest it the tree may reach
 
 
@@ -45,7 +45,8 @@ class TransitStats:
     nodes_planning: int = 0  # nodes added to connect queries
     nodes_validating: int = 0  # nodes added by RRT reconnection while validating
     seconds_planning: float = 0.0  # connecting and searching
-    seconds_validating: float = 0.0  # lazy validation and reconnection
+    seconds_validating: float = 0.0  # lazy validation
+    seconds_reconnecting: float = 0.0  # RRTConnect (reconnections; the baseline's queries count as planning)
     seconds_shortcut: float = 0.0
     seconds_contact: float = 0.0  # straight hand motions and finger motions: IK and checks
     edges_invalidated: int = 0
@@ -198,8 +199,11 @@ class LazyTransit:
             stats.rrt_calls += 1
             reconnections += 1
             check = self.near if {a, *targets} & set(self.ends) else self.full
+            t_rrt = time.perf_counter()
             found = _rrt(self.space, check, self._config(a), np.array([self._config(n) for n in targets]),
                          int(self.rng.integers(2**31)), self.p.reconnect_time, self.p.rrt_step)
+            stats.seconds_reconnecting += time.perf_counter() - t_rrt
+            t += time.perf_counter() - t_rrt  # the RRT's time is not validation's
             if found is not None:
                 ids = self.graph.add_nodes(found[1:-1])
                 reached = self.space.distance(np.array([self._config(n) for n in targets]), found[-1])
