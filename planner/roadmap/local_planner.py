@@ -30,13 +30,14 @@ def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.nd
     (a bounding sphere for primitives).
     """
     model = cm.robot.model
-    axes = _axes(model)
     radii = np.zeros((len(cm.geometry.geometryObjects), model.nq))
     skip = 0 if known is None else len(known)
     radii[:skip] = known
+    axes = None
     for g, obj in enumerate(cm.geometry.geometryObjects):
         if g < skip or obj.parentJoint == 0:
             continue  # fixed in the world (obstacles, a static object): no joint moves it
+        axes = _axes(model) if axes is None else axes
         geom = obj.geometry
         if hasattr(geom, "points"):
             pts = np.asarray(geom.points()) @ obj.placement.rotation.T + obj.placement.translation
