@@ -3,7 +3,9 @@
 The lazy-transit test uses the example session's Super Graph and puts the statuette, as a static
 obstacle, in the middle of the path the graph returns without it: the planner must search again and
 come back with a path that an independent re-check (the robot's URDF geometry against the object with
-python-fcl, every segment at ten times the resolution of the object's pairs) finds free.
+python-fcl, every segment at ten times the resolution of the object's pairs) finds free. The carried
+test does the same with the object hanging from a palm, and shows once that the independent check
+catches a planner whose model is blind to the carried object's obstacles.
 """
 from __future__ import annotations
 
@@ -155,12 +157,10 @@ def test_rrt_reconnects_what_the_graph_cannot(example):
     assert validity.path_valid(path) and all(space.holds(q) for q in path)
 
 
-@pytest.mark.slow
-def test_lazy_transit_goes_around_with_the_carried_object(example):
-    """The object carried by a hand, hanging far out of its palm: the path the graph returns for the robot alone sweeps it
-    through something, the lazy search invalidates what it hits and goes around, and the independent check (URDF meshes
-    and the carried object with python-fcl, every segment at ten times the resolution of the object's pairs) finds the
-    new path free."""
+@pytest.fixture(scope="module")
+def carried(example):
+    """A goal the graph is searched for from q_initial, and a hold (the object 25 cm out of a palm along one of its axes)
+    free at both ends but hit along the path the graph returns for the robot alone."""
     import pinocchio as pin
 
     from planner.collision import build_collision_model
@@ -175,7 +175,6 @@ def test_lazy_transit_goes_around_with_the_carried_object(example):
     arm = robot.spec.arm_names[0]
     cm = build_collision_model(robot, scene.environment)
     idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
-    profile = transit_profile(roadmap.resolution, 0.02, 0.008)
     shape = coal_mesh(scene.object_mesh)
     oracle = Oracle(scene)
     data = robot.model.createData()
@@ -189,10 +188,8 @@ def test_lazy_transit_goes_around_with_the_carried_object(example):
     nodes = np.flatnonzero(roadmap.node_component == big)
     q_start = scene.q_initial
     space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
+    profile = transit_profile(roadmap.resolution, 0.02, 0.008)
     free = make_validity(situation_model(cm, shape, Situation(None, _far()), (), idx), profile, "moving")
-    # a goal the graph is searched for, the path for the robot alone, and a hold (the object 25 cm out of the palm along
-    # one of its axes) free at both ends but hit along that path
-    chosen = None
     for goal_node in nodes[np.argsort(-space.distance(roadmap.node_q[nodes], q_start))][:400]:
         q_goal = roadmap.node_q[goal_node]
         if free.motion_valid(q_start, q_goal):
@@ -202,24 +199,60 @@ def test_lazy_transit_goes_around_with_the_carried_object(example):
         for axis in np.vstack([np.eye(3), -np.eye(3)]):
             hold = np.eye(4)
             hold[:3, 3] = -0.25 * axis  # palm in the object's frame: the object 25 cm along `axis` from the palm
-            carried = lambda q, hold=hold: palm(q) @ np.linalg.inv(hold)  # noqa: E731
-            if any(oracle.collisions(q, carried(q), arm, None, False) for q in (q_start, q_goal)):
+            at = lambda q, hold=hold: palm(q) @ np.linalg.inv(hold)  # noqa: E731
+            if any(oracle.collisions(q, at(q), arm, None, False) for q in (q_start, q_goal)):
                 continue
-            if any(oracle.collisions(q, carried(q), arm, None, False) for a, b in zip(alone[:-1], alone[1:]) for q in np.linspace(a, b, 5)):
-                chosen = q_goal, hold, carried, alone
-                break
-        if chosen:
-            break
-    assert chosen, "no goal and hold whose object-free path sweeps the carried object through something"
-    q_goal, hold, carried, alone = chosen
-    validity = make_validity(situation_model(cm, shape, Situation(arm, hold), (), idx), profile, "moving")
-    assert validity.state_valid(q_start) and validity.state_valid(q_goal)
+            if any(oracle.collisions(q, at(q), arm, None, False) for a, b in zip(alone[:-1], alone[1:]) for q in np.linspace(a, b, 5)):
+                return {"arm": arm, "q_start": q_start, "q_goal": q_goal, "hold": hold, "at": at, "space": space, "cm": cm,
+                        "shape": shape, "idx": idx, "profile": profile, "oracle": oracle}
+    pytest.fail("no goal and hold whose object-free path sweeps the carried object through something")
+
+
+def _carry(example, case) -> tuple[list[str], object]:
+    """The lazy transit of the carried case; (what the independent check finds along it, at ten times the resolution of the
+    object's pairs, the transit's stats)."""
+    from planner.motion.graph import MotionGraph
+    from planner.motion.situation import Situation, situation_model
+    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+    from planner.motion.validity import make_validity
+
+    _, roadmap, _ = example
+    c = case
+    validity = make_validity(situation_model(c["cm"], c["shape"], Situation(c["arm"], c["hold"]), (), c["idx"]), c["profile"], "moving")
     stats = TransitStats()
-    path = LazyTransit(MotionGraph(roadmap), space, validity.on("changed"), validity, validity, TransitParams(),
-                       np.random.default_rng(0), stats).query(q_start, q_goal)
+    path = LazyTransit(MotionGraph(roadmap), c["space"], validity.on("changed"), validity, validity, TransitParams(),
+                       np.random.default_rng(0), stats).query(c["q_start"], c["q_goal"])
+    assert np.allclose(path[0], c["q_start"]) and np.allclose(path[-1], c["q_goal"])
+    hits = [hit for a, b in zip(path[:-1], path[1:]) for s in np.linspace(0, 1, 10 * validity.samples(a, b, "object"))
+            for hit in c["oracle"].collisions(a + s * (b - a), c["at"](a + s * (b - a)), c["arm"], None, False)]
+    return hits, stats
+
+
+@pytest.mark.slow
+def test_lazy_transit_goes_around_with_the_carried_object(example, carried):
+    """The carried object cuts the path the graph gives the robot alone: the lazy search invalidates what it hits and goes
+    around, and the independent check (URDF meshes and the carried object with python-fcl) finds the new path free."""
+    hits, stats = _carry(example, carried)
     assert stats.edges_invalidated + stats.rrt_calls > 0, "the carried object must have cut the robot-alone path"
-    assert np.allclose(path[0], q_start) and np.allclose(path[-1], q_goal)
-    for a, b in zip(path[:-1], path[1:]):
-        for s in np.linspace(0, 1, 10 * validity.samples(a, b, "object")):
-            q = a + s * (b - a)
-            assert not oracle.collisions(q, carried(q), arm, None, False), f"the carried object hits something at s={s:.3f}"
+    assert hits == []
+
+
+@pytest.mark.slow
+def test_the_independent_check_catches_a_checker_blind_to_the_carried_object(example, carried, monkeypatch):
+    """The same transit with the planner's model broken on purpose (the carried object no longer checked against the
+    obstacles): the independent check must find the collisions the planner then lets through."""
+    import dataclasses
+
+    import planner.motion.situation as situation
+
+    original = situation.situation_model
+
+    def blind(cm, shape, s, moved, moving):
+        model = original(cm, shape, s, moved, moving)
+        obstacles = len(cm.geometry.geometryObjects) - cm.n_robot_geoms
+        object_env = model.subsets["env"][-obstacles:]  # the carried object's pairs with the obstacles come last
+        return dataclasses.replace(model, subsets={**model.subsets, "moving": np.setdiff1d(model.subsets["moving"], object_env)})
+
+    monkeypatch.setattr(situation, "situation_model", blind)
+    hits, _ = _carry(example, carried)
+    assert any("the object with" in h for h in hits), "a checker blind to the carried object's obstacles went unnoticed"
