@@ -40,7 +40,7 @@ from .result import PHASES
 from .situation import Situation, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
-from .validity import Clearances, Profile, Validity, fitted, make_validity
+from .validity import Clearances, Profile, Validity, fits, fitted, make_validity
 
 
 @dataclass(frozen=True)
@@ -163,15 +163,15 @@ class PhasePlanner:
                 yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
 
     def ready(self, q: np.ndarray, situation: Situation, phase: int, part: str) -> float:
-        """PieceFailed unless a transit can start or end at q in the situation: checked as a transit checks its ends
-        (the transit paddings fitted to q's clearances), so the transit will accept it. Returns how free q is: the
+        """PieceFailed unless a transit can start or end at q in the situation: q is valid with the transit paddings
+        fitted to its clearances, as a transit checks its ends (see validity.fits). Returns how free q is: the
         smallest share of a transit padding it keeps beyond the clearance guaranteed (1: as free as a roadmap node, so
         the transit's checks are as sparse as the roadmap's)."""
         model = self.model(situation, q, self.transit_idx)
         have = self.clearances(model, q)
-        end = self.validity(model, fitted(self.transit_profile, have))
-        if not end.state_valid(q):
-            raise PieceFailed(phase, part, lambda: f"ends too near something to start a transit ({_pairs(end.first_collision(q[None]))})")
+        if not fits(self.transit_profile, have):
+            end = lambda: self.validity(model, fitted(self.transit_profile, have))  # noqa: E731
+            raise PieceFailed(phase, part, lambda: f"ends too near something to start a transit ({_pairs(end().first_collision(q[None]))})")
         t = self.transit_profile
         return min(1.0, *((have[k] - keep) / (pad - keep) for k, pad, keep in (
             ("env", t.env_padding, t.env_clearance), ("self", t.self_padding, t.self_clearance),

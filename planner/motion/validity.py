@@ -137,6 +137,14 @@ class Clearances:
         return {k: float(distance[self.kind == k].min(initial=np.inf)) for k in ("env", "self", "object")}
 
 
+def fits(profile: Profile, clearance: dict[str, float]) -> bool:
+    """Whether a configuration with these clearances is valid under the profile fitted to them (see `fitted`): each
+    clearance at least its padding, or able to lower it while the clearance guaranteed stays below."""
+    return all(clearance[k] > pad or 0.9 * clearance[k] > keep for k, pad, keep in (
+        ("env", profile.env_padding, profile.env_clearance), ("self", profile.self_padding, profile.self_clearance),
+        ("object", profile.object_padding, profile.object_clearance)))
+
+
 def fitted(profile: Profile, clearance: dict[str, float]) -> Profile:
     """The profile with each padding lowered, when the given clearances are smaller, to 90 % of them (never to or
     below the clearance it guarantees): checks stay as sparse as the motion's ends allow, the guarantee unchanged."""
