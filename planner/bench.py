@@ -164,7 +164,8 @@ class MotionBench:
 
     def where(self, planner: str) -> dict:
         """Medians over the seeds of the seconds spent in each kind of work, summed over the phases of the motion found
-        ('other': the double grasps given up before it, and setting up)."""
+        ('other': the double grasps given up before it, and setting up; the baseline's RRTConnect queries count as
+        graph search)."""
         kinds = ("graph search", "validation", "RRT", "shortcutting", "contact motions")
         rows = {k: [] for k in (*kinds, "timing and sampling", "other")}
         for r in self.runs[planner]:

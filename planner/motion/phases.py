@@ -167,8 +167,10 @@ class PhasePlanner:
         fitted to its clearances, as a transit checks its ends (see validity.fits). Returns how free q is: the
         smallest share of a transit padding it keeps beyond the clearance guaranteed (1: as free as a roadmap node, so
         the transit's checks are as sparse as the roadmap's)."""
+        t0 = time.perf_counter()
         model = self.model(situation, q, self.transit_idx)
         have = self.clearances(model, q)
+        self.stats[phase].seconds_contact += time.perf_counter() - t0
         if not fits(self.transit_profile, have):
             end = lambda: self.validity(model, fitted(self.transit_profile, have))  # noqa: E731
             raise PieceFailed(phase, part, lambda: f"ends too near something to start a transit ({_pairs(end().first_collision(q[None]))})")
@@ -318,7 +320,7 @@ class PhasePlanner:
             piece = self.contact(1, "lift", lift, Situation(a.arm, g_a, (), support_i), a.arm)
             return lift[-1], [piece], self.ready(lift[-1], held_a, 1, "lift")
 
-        q_lifted, lifted, _ = next(freest(self.options(1, "lift", iter(self.lifts(oi, q_grasp, a.arm)), lift_off)))
+        q_lifted, lifted, _ = next(freest(self.options(1, "lift", iter(self.lifts(oi, q_grasp, a.arm, 1)), lift_off)))
         q_x = self.with_fingers(q_exch, a.arm, a.fingers)
 
         def exchange(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
@@ -357,7 +359,7 @@ class PhasePlanner:
             piece = self.contact(2, "set-down", lower, Situation(b.arm, g_b, (), support_f), b.arm)
             return lower[0], [piece], self.ready(lower[0], held_b, 2, "above the placement")
 
-        downs = freest(self.options(2, "set-down", iter(self.lifts(of, q_place, b.arm)), set_down))
+        downs = freest(self.options(2, "set-down", iter(self.lifts(of, q_place, b.arm, 2)), set_down))
         first_down = next(downs)
         let_go = Situation(None, of, tips_b)
         let_go_b = self.fingers(2, "opening", q_down, b.arm, let_b, let_go)
@@ -393,7 +395,7 @@ class PhasePlanner:
                 continue
         return []
 
-    def lifts(self, pose: np.ndarray, q: np.ndarray, arm: str) -> list[np.ndarray]:
+    def lifts(self, pose: np.ndarray, q: np.ndarray, arm: str, phase: int) -> list[np.ndarray]:
         """World offsets to lift the object at `pose`, held by `arm` at q, off its support (reversed: to set it down
         there), freest first: up, then tilted 30°, 55° and 75° from the vertical in eight directions, each by the lift
         distance and twice as far, ordered by the clearance of the object and the hand from the obstacles at the
@@ -423,7 +425,9 @@ class PhasePlanner:
                     out = min(out, coal.distance(shape, where, obstacle, at, req, res))
             return out
 
+        t0 = time.perf_counter()
         free = [clearance(o) for o in offsets]
+        self.stats[phase].seconds_contact += time.perf_counter() - t0
         return [offsets[i] for i in sorted(range(len(offsets)), key=lambda i: -free[i])][: self.p.lift_candidates]
 
     def options(self, phase: int, part: str, candidates: Iterator, build) -> Iterator:

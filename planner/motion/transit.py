@@ -48,7 +48,7 @@ class TransitStats:
     seconds_validating: float = 0.0  # lazy validation
     seconds_reconnecting: float = 0.0  # RRTConnect (reconnections; the baseline's queries count as planning)
     seconds_shortcut: float = 0.0
-    seconds_contact: float = 0.0  # straight hand motions and finger motions: IK and checks
+    seconds_contact: float = 0.0  # straight hand motions and finger motions (IK and checks), their ends' clearances
     edges_invalidated: int = 0
     rrt_calls: int = 0
     searches: int = 0
