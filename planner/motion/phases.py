@@ -465,13 +465,16 @@ class PhasePlanner:
         return tuple(out)
 
 
+FREE_ENOUGH = 0.75  # an end keeping three quarters of every transit padding is taken without looking further
+
+
 def freest(options: Iterator[tuple]) -> Iterator[tuple]:
-    """Options ((q, pieces, freedom) with freedom as `ready` gives it) in order while they are fully free, the others
+    """Options ((q, pieces, freedom) with freedom as `ready` gives it) in order while they are free enough, the others
     after them, freest first: a transit from a free end checks sparsely and leaves it easily."""
     held = []
     try:
         for option in options:
-            if option[2] >= 1.0:
+            if option[2] >= FREE_ENOUGH:
                 yield option
             else:
                 held.append(option)
