@@ -3,8 +3,9 @@
 Offline, every node and edge was validated for the robot alone with open hands (`offline`).
 Online, each phase has its own validity, so each phase keeps its own status of nodes and edges
 (unknown, valid, invalid): lazy revalidation marks them as it checks, and edges added by the RRT
-reconnection stay in the graph for later phases (as edges nobody validated offline), as the paper
-enriches its PRM with RRT trees.
+reconnection stay in the graph (as edges nobody validated offline) for the rest of that phase's
+transit, as the paper enriches its PRM with RRT trees. Each phase's transit works on its own copy of
+the graph: the four are planned at once, in parallel.
 """
 from __future__ import annotations
 

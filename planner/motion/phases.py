@@ -20,6 +20,7 @@ part.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 from collections.abc import Callable, Iterator
@@ -31,6 +32,7 @@ import pinocchio as pin
 
 from ..arm_ik import ArmIK
 from ..collision import CollisionModel
+from ..forked import forked_map
 from ..geometry import coal_mesh, transform3s
 from ..reach import approach_direction
 from ..roadmap.local_planner import geometry_radii
@@ -62,10 +64,14 @@ class PieceFailed(Exception):
         super().__init__(phase, part)
         self.phase, self.part, self._why = phase, part, why
 
-    def __str__(self) -> str:
+    @property
+    def why(self) -> str:
         if callable(self._why):
             self._why = self._why()
-        return f"{PHASES[self.phase]} phase, {self.part}: {self._why}"
+        return self._why
+
+    def __str__(self) -> str:
+        return f"{PHASES[self.phase]} phase, {self.part}: {self.why}"
 
 
 @dataclass(frozen=True)
@@ -373,12 +379,43 @@ class PhasePlanner:
         opening = [] if np.allclose(q_end, scene.q_final) else [
             self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f, None)]
 
-        # the transits
-        pieces = self.reach(0, scene.q_initial, grasps, first_grasp, static_i)
-        pieces += lifted + self.reach(1, q_lifted, exchanges, first_exchange, held_a) + let_go_a + retreat_a
-        pieces += self.away(retreat_a[-1].path[-1], a.arm, q_place, held_b)
-        pieces += self.reach(2, pieces[-1].path[-1], downs, first_down, held_b) + let_go_b + retreat_b
-        return pieces + [self.transit(3, retreat_b[-1].path[-1], q_end, static_f)] + opening
+        # the transits: independent of each other now that every contact motion is made
+        def place() -> list[Piece]:
+            away = self.away(retreat_a[-1].path[-1], a.arm, q_place, held_b)
+            return away + self.reach(2, (away or retreat_a)[-1].path[-1], downs, first_down, held_b)
+
+        to_grasp, carry, to_place, rest = self.transits([
+            (0, lambda: self.reach(0, scene.q_initial, grasps, first_grasp, static_i)),
+            (1, lambda: self.reach(1, q_lifted, exchanges, first_exchange, held_a)),
+            (2, place),
+            (3, lambda: [self.transit(3, retreat_b[-1].path[-1], q_end, static_f)])])
+        return to_grasp + lifted + carry + let_go_a + retreat_a + to_place + let_go_b + retreat_b + rest + opening
+
+    def transits(self, jobs: list[tuple[int, Callable[[], list[Piece]]]]) -> list[list[Piece]]:
+        """The pieces of each (phase, job), run in forked workers (one per core); each job has its own random stream and
+        its own copy of the graph, so the result does not depend on how many run at once. Their figures join their
+        phases'; the first failure, in phase order, is raised."""
+        graph, rng, seeds = self.graph, self.rng, self.rng.integers(2**63, size=len(jobs))
+
+        def run(i: int) -> tuple[list[Piece] | tuple[int, str, str], TransitStats]:
+            phase, job = jobs[i]
+            kept = self.stats[phase]
+            self.rng, self.graph, self.stats[phase] = np.random.default_rng(seeds[i]), copy.deepcopy(graph), TransitStats()
+            try:
+                return job(), self.stats[phase]
+            except PieceFailed as exc:
+                return (exc.phase, exc.part, exc.why), self.stats[phase]
+            finally:
+                self.rng, self.graph, self.stats[phase] = rng, graph, kept
+
+        results = forked_map(run, range(len(jobs)))
+        for (phase, _), (_, stats) in zip(jobs, results):
+            for f in dataclasses.fields(stats):
+                setattr(self.stats[phase], f.name, getattr(self.stats[phase], f.name) + getattr(stats, f.name))
+        for value, _ in results:
+            if isinstance(value, tuple):
+                raise PieceFailed(*value)
+        return [value for value, _ in results]
 
     def away(self, q: np.ndarray, arm: str, q_place: np.ndarray, situation: Situation) -> list[Piece]:
         """The picking arm alone from its retreat to where it is at the placement, else to where it is at the end (so
