@@ -14,7 +14,7 @@ import viser
 
 from planner.collision import CollisionChecker, build_collision_model
 from planner.forked import sigterm_unwinds, stop_pools
-from planner.paths import ASSETS, DEFAULT_TASK
+from planner.paths import DEFAULT_TASK, TASKS_DIR
 from planner.session import Session
 from planner.task import Scene, load_task
 
@@ -27,7 +27,6 @@ from .session_panel import SessionPanel
 from .session_store import SESSIONS_DIR
 from .view import setup_view
 
-TASKS_DIR = ASSETS / "tasks"
 MAX_LISTED_PAIRS = 8
 
 
