@@ -80,14 +80,14 @@ def test_existing_session_survives_without_force(planned, default_scene):
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     with pytest.raises(RegraspError, match="already holds a session"):
         Session.create(folder, default_scene, seed=3)
-    run = subprocess.run([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(folder)],
+    run = subprocess.run([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(folder)],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2 and "--force" in run.stderr and "Traceback" not in run.stderr
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
 
 def _plan(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(out), "--seed", "5", *extra],
+    return subprocess.Popen([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(out), "--seed", "5", *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 

@@ -37,7 +37,7 @@ def folder(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("sessions") / "example"
     shutil.copytree(EXAMPLE, folder)
     if "motion" not in Session.open(folder).finished():
-        run = subprocess.run([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(folder), "--resume"],
+        run = subprocess.run([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(folder), "--resume"],
                              check=False, capture_output=True, text=True, timeout=600)
         assert run.returncode == 0, run.stderr[-2000:]
     return folder

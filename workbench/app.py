@@ -6,6 +6,7 @@ concern (the session's steps through `session_layers`; the Session panel runs st
 """
 from __future__ import annotations
 
+import sys
 import threading
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import numpy as np
 import viser
 
 from planner.collision import CollisionChecker, build_collision_model
+from planner.errors import RegraspError
 from planner.forked import sigterm_unwinds, stop_pools
 from planner.paths import DEFAULT_TASK, TASKS_DIR
 from planner.session import Session
@@ -48,6 +50,9 @@ class Workbench:
         scene = opened.scene if opened is not None else load_task(task or DEFAULT_TASK)
         self.host = host
         self.server = viser.ViserServer(host, port, label="regrasp", verbose=False)
+        if port and self.server.get_port() != port:  # viser moves on to the next free port; a person asked for this one
+            self.server.stop()
+            raise RegraspError(f"port {port} on {host} is in use (another workbench?): stop it, or choose another with --port")
         self._lock = threading.RLock()
         self._generation = 0
         self.collision_ready = threading.Event()
@@ -272,6 +277,7 @@ class Workbench:
 def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080, session: str | Path | None = None) -> None:
     """Start the workbench (on a task, or replaying a saved session) and serve until interrupted (Ctrl-C)."""
     workbench = Workbench(task, host, port, session=session)
+    print(f"regrasp workbench: open {workbench.url} (Ctrl-C stops it)", file=sys.stderr, flush=True)
     try:
         with sigterm_unwinds():  # SIGTERM ends the server like Ctrl-C: the workers of a running step are killed too
             workbench.server.sleep_forever()
