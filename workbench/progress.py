@@ -21,7 +21,7 @@ class Bars:
         self.tty = self.stream.isatty()
         self._bar: tqdm | None = None
         self._label = ""
-        self._printed = -1  # the last percentage printed as a plain line
+        self._printed: int | None = None  # the last percentage printed as a plain line (None: none yet)
 
     def __enter__(self) -> Bars:
         return self
@@ -32,7 +32,7 @@ class Bars:
     def start(self, label: str) -> Progress:
         """End the current bar and begin one for `label`; returns its `(fraction, message)` callback."""
         self.close()
-        self._label, self._printed = label, -1
+        self._label, self._printed = label, None
         if self.tty:
             self._bar = tqdm(total=100, file=self.stream, leave=True, dynamic_ncols=True,
                              bar_format=f"{label:<{LABEL_WIDTH}} {{percentage:3.0f}}% |{{bar:24}}| {{desc}}")
@@ -45,7 +45,7 @@ class Bars:
             self._bar.n = percent
             self._bar.set_description_str(message, refresh=False)
             self._bar.refresh()
-        elif not self.tty and (percent >= self._printed + PLAIN_STEP or (percent == 100 and self._printed < 100)):
+        elif not self.tty and (self._printed is None or percent >= self._printed + PLAIN_STEP or (percent == 100 > self._printed)):
             self._printed = percent
             print(f"{self._label}: {percent:3d}% {message}".rstrip(), file=self.stream, flush=True)
         if fraction >= 1.0:
