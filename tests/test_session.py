@@ -202,3 +202,21 @@ def test_branch_keeps_the_original(planned, tmp_path):
     run_pipeline(new, params={"arms": {"seeds": 40}})
     assert new.record_of("arms")["params"]["seeds"] == 40
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_session_records_the_task_by_name_or_relative_path(tmp_path, default_scene):
+    """session.json never holds an absolute path of the machine that wrote it; old sessions that do still load."""
+    from planner.task import load_task
+
+    named = Session.create(tmp_path / "named", default_scene, seed=0)
+    assert json.loads((named.folder / MANIFEST).read_text())["task_source"] == "default"
+    own = tmp_path / "tasks" / "mine.toml"
+    own.parent.mkdir()
+    own.write_text(default_scene.source.read_text())
+    relative = Session.create(tmp_path / "runs" / "one", load_task(own), seed=0)
+    recorded = json.loads((relative.folder / MANIFEST).read_text())["task_source"]
+    assert recorded == "../../tasks/mine.toml" and str(tmp_path) not in (relative.folder / MANIFEST).read_text()
+    for old in ("/somewhere/else/assets/tasks/default.toml", "../../../../etc/passwd"):  # a note for people: never opened
+        manifest = json.loads((named.folder / MANIFEST).read_text())
+        (named.folder / MANIFEST).write_text(json.dumps({**manifest, "task_source": old}))
+        assert Session.open(named.folder).scene.source == named.folder / MANIFEST
