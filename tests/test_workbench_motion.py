@@ -79,17 +79,18 @@ def _project(workbench: Workbench, point: np.ndarray) -> np.ndarray:
     return np.array([u * VIEWPORT["width"] / camera.image_width, v * VIEWPORT["height"] / camera.image_height])
 
 
-def _object_on_screen(workbench: Workbench, page: Page, layer: MotionLayer) -> np.ndarray:
-    """The centre (x, y px) of the pixels the layer's object covers: the view with it shown, against the view without
-    (taken again until the view with it is the same before and after, so nothing else changed meanwhile)."""
-    assert layer.object is not None
+def _object_on_screen(workbench: Workbench, page: Page) -> np.ndarray:
+    """The centre (x, y px) of the pixels the workbench's object covers (the motion layer moves it): the view with it
+    shown, against the view without (taken again until the view with it is the same before and after, so nothing else
+    changed meanwhile)."""
+    shown_object = workbench.scene_layer.object
     for _ in range(3):
         shown = _settled(page)
-        layer.object.visible = False
+        shown_object.visible = False
         try:
             hidden = _settled(page)
         finally:
-            layer.object.visible = True
+            shown_object.visible = True
         if _changed(_settled(page), shown) < 1e-4:
             break
     else:
@@ -154,7 +155,7 @@ def test_object_moves_with_the_hand(workbench: Workbench, page: Page, layer: Mot
             layer.timeline.value = i
             assert _wait_for(lambda i=i: np.allclose(workbench.q, r.q[i])), "the timeline did not pose the robot"
             assert PHASES[phase] in layer.now.content
-            seen, expected = _object_on_screen(workbench, page, layer), _project(workbench, _object_centre(layer, i))
+            seen, expected = _object_on_screen(workbench, page), _project(workbench, _object_centre(layer, i))
             assert np.linalg.norm(seen - expected) < NEAR, f"{PHASES[phase]}: object seen at {seen}, its pose projects to {expected}"
             centres.append(seen)
         moved = np.linalg.norm(centres[1] - centres[0])
