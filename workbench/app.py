@@ -17,7 +17,7 @@ from planner.collision import CollisionChecker, build_collision_model
 from planner.errors import RegraspError
 from planner.forked import sigterm_unwinds, stop_pools
 from planner.paths import DEFAULT_TASK, TASKS_DIR
-from planner.session import Session
+from planner.session import MANIFEST, Session
 from planner.task import Scene, load_task
 
 from .collision_layer import CollisionLayer
@@ -39,7 +39,8 @@ def task_choices(current: Path) -> dict[str, Path]:
     """Dropdown label -> file for the tasks in assets/tasks, plus the current task if it lives elsewhere."""
     choices = {p.stem: p.resolve() for p in sorted(TASKS_DIR.glob("*.toml"))}
     if current.resolve() not in choices.values():
-        choices[str(current)] = current.resolve()
+        label = f"session {current.parent.name}" if current.name == MANIFEST else str(current)  # a replayed session's task
+        choices[label] = current.resolve()
     return choices
 
 
@@ -246,7 +247,9 @@ class Workbench:
                 self.task_choice.value = self._label_of(scene.source)
             finally:
                 self._syncing_choices = False
-            self.task_path.value = str(scene.source)
+            # a replayed session's task file is its session.json: show the task it came from (a name or a relative path)
+            self.task_path.value = session.manifest.get("task_source", "") if session is not None and scene is session.scene \
+                else str(scene.source)
             self.task_info.content = f"**{scene.name}** — {scene.description}" if scene.description else f"**{scene.name}**"
             self.part.options = tuple(scene.robot.part_names())
             self._rebuild_sliders()
