@@ -21,6 +21,7 @@ def workbench(tmp_path_factory) -> Iterator[Workbench]:
     folder = tmp_path_factory.mktemp("sessions") / "example"
     shutil.copytree(EXAMPLE, folder)
     wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=folder.parent)
+    wb.focus_step("roadmap")  # hidden at first (only the last step, motion, is shown)
     yield wb
     wb.close()
 

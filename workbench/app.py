@@ -31,7 +31,7 @@ from .session_store import SESSIONS_DIR
 from .view import CAMERA_LOOK_AT, CAMERA_POSITION, close_up, move_cameras, setup_view
 
 MAX_LISTED_PAIRS = 8
-VIEWS = ("overview", "start", "exchange", "goal")  # camera buttons: the scene, the object at its start, the handover, its goal
+VIEWS = ("overview", "start", "handover", "goal")  # camera buttons: the scene, the object at its start, the exchange, its goal
 GRASP_CLOSE_UP = 0.6  # m from the object when a grasp is chosen
 
 
@@ -218,7 +218,7 @@ class Workbench:
                 target: tuple[np.ndarray, np.ndarray] | None = (np.array(CAMERA_POSITION), np.array(CAMERA_LOOK_AT))
             else:
                 assert self.scene_layer is not None
-                point = {"start": lambda: self.scene_layer.centre(self.scene.object_initial), "exchange": self.exchange_point,
+                point = {"start": lambda: self.scene_layer.centre(self.scene.object_initial), "handover": self.exchange_point,
                          "goal": lambda: self.scene_layer.centre(self.scene.object_final)}[name]()
                 target = close_up(point) if point is not None else None
         if target is None:
@@ -315,6 +315,7 @@ class Workbench:
         """Put the robot at configuration q and the object at `object_pose` (None: where it is); the joint sliders follow in
         place, "Robot at" shows `label`, collisions are checked."""
         with self._lock:
+            self.dim(False)
             self.q = np.array(q, dtype=float)
             self._posing = True
             try:

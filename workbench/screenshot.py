@@ -28,7 +28,8 @@ SETTLE_SECONDS = 60.0
 POSE = "double grasps: pair 1 at exchange (q_exch)"  # the robot handing the object over, if the session has it
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A TCP port free on this machine right now."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -55,7 +56,7 @@ def screenshot(session: Path, out: Path) -> int:
 
     if not CHROMIUM.exists():
         raise RegraspError(f"chromium is not installed at {CHROMIUM} (apt-get install chromium)")
-    wb = Workbench(None, "127.0.0.1", _free_port(), session=session)
+    wb = Workbench(None, "127.0.0.1", free_port(), session=session)
     try:
         if POSE in wb.session_panel.robot_at.options:
             wb.session_panel.robot_at.value = POSE
