@@ -71,6 +71,7 @@ class Workbench:
         self._sliders: viser.GuiFolderHandle | None = None
         self.layer_toggles: LayerToggles | None = None
         self._dimmed = False
+        self._grasp_focus: str | None = None  # the grasp list framed while dimmed
         self._slider_of: dict[int, viser.GuiSliderHandle] = {}
         self._syncing_choices = False  # True while _show rewrites the task dropdown: its callbacks must not load a task
         self._posing = False  # True while pose_robot moves the sliders: their callbacks must not redraw joint by joint
@@ -181,11 +182,15 @@ class Workbench:
                 self.layer_toggles.focus(step)
 
     def focus_grasp(self, step: str, object_pose: np.ndarray) -> None:
-        """A grasp chosen in the layer of `step`: that layer alone, the robot and obstacles dimmed, the object framed."""
+        """A grasp chosen in the layer of `step`: that layer alone, the robot and obstacles dimmed, the object framed (once:
+        the camera stays put while more ranks of the same list are chosen)."""
         with self._lock:
+            if self._dimmed and self._grasp_focus == step:
+                return
             if self.layer_toggles is not None:
                 self.layer_toggles.focus(step)
             self.dim(True)
+            self._grasp_focus = step
             if self.scene_layer is not None:
                 move_cameras(self.server, *close_up(self.scene_layer.centre(object_pose), GRASP_CLOSE_UP))
 

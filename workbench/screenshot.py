@@ -13,7 +13,7 @@ from PIL import Image
 from planner.errors import RegraspError
 
 if TYPE_CHECKING:
-    from playwright.sync_api import Page
+    from playwright.sync_api import Browser, Page
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
@@ -48,30 +48,36 @@ def _settled_png(page: Page, timeout: float = SETTLE_SECONDS) -> bytes:
     raise RegraspError(f"the workbench never finished drawing within {timeout:.0f} s")
 
 
-def screenshot(session: Path, out: Path) -> int:
-    """Replay `session` in a workbench, the robot at the exchange, photograph it in chromium into `out` (PNG); returns its bytes."""
+def screenshot(session: Path, out: Path, browser: Browser | None = None) -> int:
+    """Replay `session` in a workbench, the robot at the exchange, photograph it in chromium into `out` (PNG); returns its
+    bytes. Without `browser`, headless Debian chromium is started for it."""
     from playwright.sync_api import sync_playwright
 
     from .app import Workbench
 
-    if not CHROMIUM.exists():
-        raise RegraspError(f"chromium is not installed at {CHROMIUM} (apt-get install chromium)")
+    if browser is None:
+        if not CHROMIUM.exists():
+            raise RegraspError(f"chromium is not installed at {CHROMIUM} (apt-get install chromium)")
+        with sync_playwright() as p:
+            started = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+            try:
+                return screenshot(session, out, started)
+            finally:
+                started.close()
     wb = Workbench(None, "127.0.0.1", free_port(), session=session)
     try:
         if POSE in wb.session_panel.robot_at.options:
             wb.session_panel.robot_at.value = POSE
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-            try:
-                page = browser.new_page(viewport=VIEWPORT)
-                page.goto(wb.url)
-                page.get_by_text("Collisions:").wait_for(timeout=60_000)
-                wb.collision_ready.wait(60)
-                for close in page.locator(".mantine-Notification-closeButton").all():  # e.g. "software WebGL": not the workbench's
-                    close.click()
-                png = _settled_png(page)
-            finally:
-                browser.close()
+        page = browser.new_page(viewport=VIEWPORT)
+        try:
+            page.goto(wb.url)
+            page.get_by_text("Collisions:").wait_for(timeout=60_000)
+            wb.collision_ready.wait(60)
+            for close in page.locator(".mantine-Notification-closeButton").all():  # e.g. "software WebGL": not the workbench's
+                close.click()
+            png = _settled_png(page)
+        finally:
+            page.close()
     finally:
         wb.close()
     buffer = io.BytesIO()
