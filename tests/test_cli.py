@@ -213,3 +213,24 @@ def test_plan_progress_in_a_log_is_plain_lines(tmp_path):
     assert run.returncode == 0, run.stderr
     assert "\r" not in run.stderr
     assert any(re.fullmatch(r"arms: 100% .*", line) for line in run.stderr.splitlines()), run.stderr
+
+
+def test_planner_never_imports_workbench():
+    """The backend stands alone: the command line that joins both halves lives in workbench/."""
+    offenders = [f"{path}:{n}" for path in sorted((PROJECT_ROOT / "planner").rglob("*.py"))
+                 for n, line in enumerate(path.read_text().splitlines(), 1)
+                 if re.match(r"\s*(import workbench|from workbench)\b", line)]
+    assert offenders == []
+
+
+def test_readme_starts_with_the_workbench_and_shows_its_picture():
+    text = (PROJECT_ROOT / "README.md").read_text()
+    first_command = text.index("```bash")
+    assert "regrasp workbench" in text[first_command:text.index("```", first_command + 7)]
+    assert text.index("regrasp workbench") < text.index("http://127.0.0.1:8080") < text.index("pytest")
+    images = re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", text)
+    assert images == ["assets/workbench.png"], images
+    image = PROJECT_ROOT / images[0]
+    assert image.is_file() and image.stat().st_size < 300_000
+    assert image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "regrasp screenshot" in text, "the README must say how its picture is made"
