@@ -143,14 +143,19 @@ def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
     page.close()
 
 
-def test_robot_is_drawn(workbench: Workbench, page: Page) -> None:
+def _assert_robot_visible(wb: Workbench, page: Page) -> None:
+    """The view is not empty and hiding the robot changes more than 1 % of it (the robot is shown again after)."""
     with_robot = _settled(page)
     assert len(np.unique(with_robot.reshape(-1, 3), axis=0)) > 100, "the 3-D view looks empty"
-    workbench.show_robot.value = False
+    wb.show_robot.value = False
     try:
         assert _until_changed(page, with_robot) > 0.01, "hiding the robot changed almost nothing on screen"
     finally:
-        workbench.show_robot.value = True
+        wb.show_robot.value = True
+
+
+def test_robot_is_drawn(workbench: Workbench, page: Page) -> None:
+    _assert_robot_visible(workbench, page)
 
 
 def test_collision_checkbox_shows_collision_geometry(workbench: Workbench, page: Page) -> None:

@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     import trimesh
 
     from planner.robot_spec import RobotSpec
+    from planner.task import Scene
 
 EXAMPLE_SESSION = PROJECT_ROOT / "sessions" / "default-example"
 SCREENSHOT = PROJECT_ROOT / "assets" / "workbench.png"
@@ -56,34 +57,31 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
+def _bench_in_scratch(args: argparse.Namespace, bench: Callable[[Scene, Path, Callable[[str], None]], Any]) -> int:
+    """Run a benchmark that writes sessions into a scratch folder (deleted after), print its table and maybe its JSON."""
     import tempfile
 
-    from planner.bench import bench_double_grasps
     from planner.task import load_task
 
     scene = load_task(args.task)
     with tempfile.TemporaryDirectory(prefix="regrasp-bench-") as tmp:
-        result = bench_double_grasps(scene, args.seed, args.repeat, Path(tmp), lambda m: print(m, file=sys.stderr))
+        result = bench(scene, Path(tmp), lambda m: print(m, file=sys.stderr))
     print(result.render())
     if args.json:
         _write_json(Path(args.json), result.to_dict())
     return 0
+
+
+def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
+    from planner.bench import bench_double_grasps
+
+    return _bench_in_scratch(args, lambda scene, tmp, say: bench_double_grasps(scene, args.seed, args.repeat, tmp, say))
 
 
 def _cmd_bench_motion(args: argparse.Namespace) -> int:
-    import tempfile
-
     from planner.bench import bench_motion
-    from planner.task import load_task
 
-    scene = load_task(args.task)
-    with tempfile.TemporaryDirectory(prefix="regrasp-bench-") as tmp:
-        result = bench_motion(scene, args.seeds, Path(tmp), lambda m: print(m, file=sys.stderr))
-    print(result.render())
-    if args.json:
-        _write_json(Path(args.json), result.to_dict())
-    return 0
+    return _bench_in_scratch(args, lambda scene, tmp, say: bench_motion(scene, args.seeds, tmp, say))
 
 
 def step_params(assignments: list[str]) -> dict[str, dict[str, Any]]:
