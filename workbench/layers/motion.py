@@ -179,6 +179,7 @@ class MotionLayer(StepLayer):
         if self.playing:
             wb.robot_layer.update(r.q[i])
             wb.scene_layer.place_object(r.object_pose[i])
+            wb.session_panel.showing(TIMELINE)
         else:
             wb.pose_robot(r.q[i], r.object_pose[i], TIMELINE)
 
