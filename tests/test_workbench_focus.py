@@ -77,6 +77,7 @@ def test_only_the_last_step_is_in_focus(workbench: Workbench) -> None:
     rows = [row for row in panel.table.content.splitlines()[2:]]
     assert all(1 <= row.split("|")[4].count("=") <= 3 for row in rows), panel.table.content
     assert "collision_checks" not in panel.table.content  # the roadmap's many figures: in its details only
+    assert workbench.task_path.value == "default" and workbench.task_choice.value == "session example"  # not …/session.json
     panel.step.value = "roadmap"
     try:
         assert workbench.layer_toggles.shown() == ["roadmap"] and "| collision_checks |" in panel.details.content

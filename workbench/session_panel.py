@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 import viser
 
 from planner.errors import RegraspError
@@ -112,7 +113,7 @@ class SessionPanel:
         for name, message in (layers.errors if layers is not None else {}).items():
             self._say(f"Could not draw {name}", message, error=True)
         self.robot_at.options = tuple(self._poses)
-        self.showing(INITIAL)
+        self.showing(INITIAL if np.array_equal(self.wb.q, scene.q_initial) else OTHER)  # a run keeps the robot where it was
         if session is not None and session.folder != self._scratch:
             self.name.value = session.folder.name
         self._rebuild_params()
