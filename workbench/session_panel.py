@@ -112,8 +112,12 @@ class SessionPanel:
         self._poses = {INITIAL: Pose(scene.q_initial, scene.object_initial), **(layers.poses() if layers is not None else {})}
         for name, message in (layers.errors if layers is not None else {}).items():
             self._say(f"Could not draw {name}", message, error=True)
-        self.robot_at.options = tuple(self._poses)
-        self.showing(INITIAL if np.array_equal(self.wb.q, scene.q_initial) else OTHER)  # a run keeps the robot where it was
+        self._syncing_robot_at = True  # new options must not move the robot: a run keeps it where it was
+        try:
+            self.robot_at.options = tuple(self._poses)
+        finally:
+            self._syncing_robot_at = False
+        self.showing(INITIAL if np.array_equal(self.wb.q, scene.q_initial) else OTHER)
         if session is not None and session.folder != self._scratch:
             self.name.value = session.folder.name
         self._rebuild_params()
