@@ -168,11 +168,11 @@ def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
         if need not in done:
             _fail(path, f"{field}.name", f"step '{name}' needs '{need}', which is not listed before it")
     params = _typed(record["params"], dict, path, f"{field}.params", "an object of parameters")
+    _finite_params(params, path, f"{field}.params")  # first: it names the parameter's own field
     try:
         step.make_params(params)
     except RegraspError as exc:
         raise InputError(path, f"{field}.params", str(exc)) from exc
-    _finite_params(params, path, f"{field}.params")
     _seed(record["seed"], path, f"{field}.seed")
     _seconds(record["seconds"], path, f"{field}.seconds")
     _typed(record["stats"], dict, path, f"{field}.stats", "an object of statistics")
