@@ -27,6 +27,7 @@ from test_workbench_grasps import _choose_rank
 
 from workbench.app import GRASP_CLOSE_UP, VIEWS, Workbench
 from workbench.layers.double_grasps import DoubleGraspsLayer
+from workbench.layers.roadmap import BACKGROUND, faint
 from workbench.scene_layer import DIM_OPACITY
 from workbench.screenshot import MAX_BYTES, VIEWPORT, screenshot
 from workbench.view import CAMERA_POSITION, close_up
@@ -83,6 +84,14 @@ def test_only_the_last_step_is_in_focus(workbench: Workbench) -> None:
         assert workbench.layer_toggles.shown() == ["roadmap"] and "| collision_checks |" in panel.details.content
     finally:
         panel.step.value = "motion"
+
+
+def test_super_graph_is_drawn_faint() -> None:
+    """Its edge colours are faded most of the way to the background, so it never hides the robot when shown."""
+    colors = np.array([[0, 0, 0], [40, 110, 240], [BACKGROUND] * 3], dtype=np.uint8)
+    faded = faint(colors).astype(int)
+    assert np.all(np.abs(BACKGROUND - faded) <= np.ceil(0.4 * np.abs(BACKGROUND - colors.astype(int))))
+    assert np.array_equal(faded[2], [BACKGROUND] * 3)
 
 
 def test_robot_pixels_are_visible(workbench: Workbench, page: Page) -> None:
