@@ -12,6 +12,8 @@ from PIL import Image
 
 from planner.errors import RegraspError
 
+from .view import close_up, move_cameras
+
 if TYPE_CHECKING:
     from playwright.sync_api import Browser, Page
 
@@ -26,6 +28,7 @@ COLORS = 160  # the PNG's palette: keeps the picture under MAX_BYTES
 MAX_BYTES = 300_000
 SETTLE_SECONDS = 60.0
 POSE = "double grasps: pair 1 at exchange (q_exch)"  # the robot handing the object over, if the session has it
+DISTANCE = 1.7  # m from the exchange: the robot, the desk and both placements in view
 
 
 def free_port() -> int:
@@ -75,6 +78,10 @@ def screenshot(session: Path, out: Path, browser: Browser | None = None) -> int:
             wb.collision_ready.wait(60)
             for close in page.locator(".mantine-Notification-closeButton").all():  # e.g. "software WebGL": not the workbench's
                 close.click()
+            point = wb.exchange_point()
+            if point is not None:
+                for job in move_cameras(wb.server, *close_up(point, DISTANCE), seconds=0.1):
+                    job.join()
             png = _settled_png(page)
         finally:
             page.close()
