@@ -310,6 +310,7 @@ def parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def command(name: str, text: str, func: Callable[[argparse.Namespace], int], parent: Any = sub, **kw: Any) -> argparse.ArgumentParser:
+        """A sub-command: `text` is its one-line help and, capitalised, its description."""
         c = parent.add_parser(name, help=text, description=text[0].upper() + text[1:] + ".", formatter_class=_Help, **kw)
         c.set_defaults(func=func)
         return c
