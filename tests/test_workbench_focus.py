@@ -151,10 +151,12 @@ def test_robot_at_the_exchange_holds_the_object_between_the_hands(workbench: Wor
     r, panel = layer.result, workbench.session_panel
     workbench.show_view("handover")
     assert _camera_at(workbench, close_up(workbench.scene_layer.centre(r.object_exchange[0]))[0])
-    label = DoubleGraspsLayer.label(0, "exchange")
+    label, sliders = DoubleGraspsLayer.label(0, "exchange"), dict(workbench._slider_of)
     panel.robot_at.value = label
     try:
         assert np.allclose(workbench.q, r.q_exch[0]) and panel.robot_at.value == label
+        assert workbench._slider_of == sliders, "posing the robot rebuilt the joint sliders (they vanish and come back)"
+        assert all(np.isclose(slider.value, r.q_exch[0][i]) for i, slider in sliders.items()), "the sliders did not follow"
         mask = _object_pixels(workbench, page)
         rows, cols = np.nonzero(mask)
         pixels = np.stack([cols, rows], axis=1)
