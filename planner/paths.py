@@ -11,7 +11,8 @@ from .results import writing
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 ASSETS = PROJECT_ROOT / "assets"
-DEFAULT_TASK = ASSETS / "tasks" / "default.toml"
+TASKS_DIR = ASSETS / "tasks"
+DEFAULT_TASK = TASKS_DIR / "default.toml"
 
 
 @functools.cache

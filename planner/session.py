@@ -3,7 +3,8 @@
 `session.json` (written last, atomically) has `format_version`, `task` (the task data in full),
 `robot_spec` (the spec's text), `seed`, `versions` and `steps`: in pipeline order, one
 `{"name", "params", "seed", "seconds", "stats", "files"}` per finished step. `task_meshes.npz`
-holds every mesh the task names, so a replay needs no task file. Each step writes
+holds every mesh the task names, so a replay needs no task file. `task_source` says where the task came from (a name
+in assets/tasks/ or a path relative to the session): a note for people, never opened (old sessions hold absolute paths). Each step writes
 `<step>.npz` + `<step>.json` (see `results.py`).
 """
 from __future__ import annotations
@@ -38,7 +39,7 @@ from .results import (
 )
 from .robot import load_robot
 from .steps import Step
-from .task import Scene, scene_from_dict
+from .task import Scene, scene_from_dict, task_reference
 
 FORMAT_VERSION = 1
 MANIFEST = "session.json"
@@ -167,11 +168,11 @@ def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
         if need not in done:
             _fail(path, f"{field}.name", f"step '{name}' needs '{need}', which is not listed before it")
     params = _typed(record["params"], dict, path, f"{field}.params", "an object of parameters")
+    _finite_params(params, path, f"{field}.params")  # first: it names the parameter's own field
     try:
         step.make_params(params)
     except RegraspError as exc:
         raise InputError(path, f"{field}.params", str(exc)) from exc
-    _finite_params(params, path, f"{field}.params")
     _seed(record["seed"], path, f"{field}.seed")
     _seconds(record["seconds"], path, f"{field}.seconds")
     _typed(record["stats"], dict, path, f"{field}.stats", "an object of statistics")
@@ -213,7 +214,7 @@ def check_manifest(manifest: dict[str, Any], path: Path) -> None:
         _fail(path, "format_version", f"expected a format version from 1 to {FORMAT_VERSION}, got {version}")
     _typed(manifest["task"], dict, path, "task", "the task as a JSON object")
     if "task_source" in manifest:
-        _typed(manifest["task_source"], str, path, "task_source", "the task file's path as a string")
+        _typed(manifest["task_source"], str, path, "task_source", "the task's name or its path relative to the session, as a string")
     spec = _typed(manifest["robot_spec"], str, path, "robot_spec", "the robot spec's text")
     if not spec.strip() or len(spec) > MAX_SPEC_CHARS:
         _fail(path, "robot_spec", f"expected the robot spec's text (1 to {MAX_SPEC_CHARS} characters), got {len(spec)} characters")
@@ -271,7 +272,7 @@ class Session:
         manifest = {
             "format_version": FORMAT_VERSION,
             "task": scene.task,
-            "task_source": str(scene.source),
+            "task_source": task_reference(scene.source, folder),
             "robot_spec": scene.robot.spec.text(),
             "robot_spec_name": scene.robot.spec.source.name,
             "seed": int(seed),

@@ -7,6 +7,7 @@ has a `stats()` method giving its key figures. `pipeline.py` lists the steps in 
 from __future__ import annotations
 
 import dataclasses
+import math
 import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -73,8 +74,10 @@ class Step:
             expected = type(getattr(defaults, name))
             if expected is float and isinstance(value, int) and not isinstance(value, bool):
                 value = float(value)
-            if not isinstance(value, expected):
+            if not isinstance(value, expected) or (expected is int and isinstance(value, bool)):
                 raise RegraspError(f"step '{self.name}': parameter {name} expects {expected.__name__}, got {value!r}")
+            if expected is float and not math.isfinite(value):
+                raise RegraspError(f"step '{self.name}': parameter {name} expects a finite number, got {value!r}")
             values[name] = value
         return dataclasses.replace(defaults, **values)
 

@@ -6,6 +6,8 @@ object mesh, its initial/final poses and the robot's initial/final configuration
 from __future__ import annotations
 
 import copy
+import difflib
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,7 +26,7 @@ from .object_mesh import (
     SizeLimits,
     load_mesh,
 )
-from .paths import ASSETS
+from .paths import ASSETS, TASKS_DIR
 from .robot import Robot, load_robot
 from .tomlread import Table, load_toml
 
@@ -197,11 +199,36 @@ def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None 
     )
 
 
+def task_names() -> list[str]:
+    """The names of the tasks in assets/tasks/ (what a TASK argument may say instead of a file)."""
+    return sorted(p.stem for p in TASKS_DIR.glob("*.toml"))
+
+
+def find_task(text: str | Path) -> Path:
+    """The task file `text` names: an existing file, else a name in assets/tasks/ (with or without `.toml`).
+
+    An unknown one is an InputError listing the names there are, with the closest as "did you mean"."""
+    path = Path(text)
+    if path.is_file():
+        return path
+    names = task_names()
+    stem = path.name.removesuffix(".toml")
+    if path.parent == Path(".") and stem in names:
+        return TASKS_DIR / f"{stem}.toml"
+    close = difflib.get_close_matches(stem, names, n=1)
+    hint = f"did you mean '{close[0]}'? " if close else ""
+    raise InputError(path, None, f"file not found, nor a task name in assets/tasks/ ({hint}tasks: {', '.join(names) or 'none'})")
+
+
+def task_reference(source: Path, folder: Path) -> str:
+    """How a session in `folder` records the task it came from: its name in assets/tasks/, else its path relative to the folder."""
+    source = source.resolve()
+    if source.parent == TASKS_DIR.resolve():
+        return source.stem
+    return os.path.relpath(source, folder.resolve())
+
+
 def load_task(path: str | Path) -> Scene:
-    """Read a task TOML file and build its Scene; a bare name is looked up in assets/tasks/."""
-    path = Path(path)
-    if not path.exists() and (ASSETS / "tasks" / path).exists():
-        path = ASSETS / "tasks" / path
-    if not path.exists() and (ASSETS / "tasks" / f"{path}.toml").exists():
-        path = ASSETS / "tasks" / f"{path}.toml"
+    """Read a task TOML file and build its Scene; a bare name is looked up in assets/tasks/ (see `find_task`)."""
+    path = find_task(path)
     return scene_from_dict(load_toml(path), path.resolve())

@@ -27,7 +27,8 @@ def default_collision(default_scene):
 def browser():
     """Headless Debian chromium driven by playwright (software WebGL); skipped only when chromium is absent."""
     from playwright.sync_api import sync_playwright
-    from test_workbench_browser import CHROMIUM, CHROMIUM_ARGS
+
+    from workbench.screenshot import CHROMIUM, CHROMIUM_ARGS
 
     if not CHROMIUM.exists():
         pytest.skip("Debian chromium is not installed at /usr/bin/chromium (apt-get install chromium)")

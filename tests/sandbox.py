@@ -59,7 +59,7 @@ def cli_env(**extra: str) -> dict[str, str]:
 
 def regrasp(*args: str, prefix: tuple[str, ...] = (), timeout: float = 600, **env: str) -> subprocess.CompletedProcess:
     """Run `regrasp <args>` as a user would (optionally under a wrapper such as setpriv), capturing its output."""
-    return subprocess.run([*prefix, sys.executable, "-m", "planner.cli", *args], capture_output=True, text=True, check=False,
+    return subprocess.run([*prefix, sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, check=False,
                           timeout=timeout, env=cli_env(**env), cwd=PROJECT_ROOT)
 
 

@@ -1,13 +1,25 @@
 """The `regrasp` command line, run as a user runs it: exit codes, tables, JSON, clear errors."""
 from __future__ import annotations
 
+import argparse
+import dataclasses
+import io
 import json
+import re
+import socket
 import subprocess
 import sys
 
+import pytest
+
+from planner.paths import PROJECT_ROOT
+from planner.pipeline import PIPELINE
+from workbench.cli import main, parser, task_argument
+from workbench.progress import Bars
+
 
 def regrasp(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "planner.cli", *args], capture_output=True, text=True, timeout=600)
+    return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, timeout=600)
 
 
 def test_check_default_task():
@@ -59,3 +71,166 @@ def test_bench_collision_json(tmp_path):
         assert key in figures
     assert figures["dof"] == 49 and figures["pairs_kept"] > 1000
     assert "median µs" in run.stdout
+
+
+# ---------------------------------------------------------------------------------------------
+# A command line that teaches itself (issue 14, item 6).
+
+
+def _parsers() -> dict[str, argparse.ArgumentParser]:
+    """Every (sub-)command's parser by its full name, e.g. 'plan', 'bench collision'."""
+    found, todo = {}, [("", parser())]
+    while todo:
+        name, p = todo.pop()
+        found[name] = p
+        for action in p._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                todo += [(f"{name} {sub}".strip(), sp) for sub, sp in action.choices.items()]
+    return found
+
+
+def test_regrasp_alone_prints_help():
+    run = regrasp()
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("usage: regrasp") and "error" not in run.stderr
+    for command in ("workbench", "check", "plan", "params", "replay", "export", "screenshot", "roadmap", "grasps", "bench"):
+        assert command in run.stdout
+
+
+def test_version():
+    from planner import __version__
+
+    run = regrasp("--version")
+    assert run.returncode == 0 and run.stdout.strip() == f"regrasp {__version__}"
+
+
+def test_task_is_the_same_positional_in_every_command():
+    takes_task = {name for name, p in _parsers().items() if any(a.dest == "task" for a in p._actions)}
+    assert takes_task == {"workbench", "check", "plan", "roadmap", "grasps", "bench collision", "bench double-grasps", "bench motion"}
+    for name in takes_task:
+        (task,) = [a for a in _parsers()[name]._actions if a.dest == "task"]
+        assert task.option_strings == [] and task.type is task_argument and task.nargs == "?", name
+    assert not any("--task" in a.option_strings for p in _parsers().values() for a in p._actions)
+    args = parser().parse_args(["roadmap", "baxter"])
+    assert args.task == PROJECT_ROOT / "assets" / "tasks" / "baxter.toml"
+    assert parser().parse_args(["bench", "collision"]).task.name == "default.toml"
+
+
+def test_wrong_task_name_suggests_and_lists(tmp_path):
+    for args in (("check", "defualt"), ("plan", "defualt", "--out", str(tmp_path / "s")), ("roadmap", "baxtr")):
+        run = regrasp(*args)
+        assert run.returncode == 2 and "Traceback" not in run.stderr, args
+        assert "did you mean '" in run.stderr and "tasks: baxter, default" in run.stderr, run.stderr
+    assert "did you mean 'baxter'" in run.stderr
+    assert not (tmp_path / "s").exists()
+    task = tmp_path / "mine.toml"
+    task.write_text((PROJECT_ROOT / "assets" / "tasks" / "default.toml").read_text())
+    assert parser().parse_args(["check", str(task)]).task == task  # a file is taken as a file
+
+
+def test_every_option_has_help_and_shows_its_default():
+    for name, p in _parsers().items():
+        text = p.format_help()
+        for action in p._actions:
+            if isinstance(action, argparse._HelpAction | argparse._VersionAction | argparse._SubParsersAction):
+                continue
+            assert action.help, f"regrasp {name}: {action.dest} has no help"
+            if action.default not in (None, False):
+                assert f"(default: {action.default})" in " ".join(text.split()), f"regrasp {name}: {action.dest} hides its default"
+
+
+def test_plan_help_lists_the_steps():
+    text = _parsers()["plan"].format_help()
+    for step in PIPELINE:
+        assert f"  {step.name} " in text
+
+
+def test_params_lists_every_parameter_with_type_and_default():
+    run = regrasp("params")
+    assert run.returncode == 0, run.stderr
+    for step in PIPELINE:
+        defaults = step.params()
+        for f in dataclasses.fields(step.params):
+            line = next(li for li in run.stdout.splitlines() if li.split()[:1] == [f"{step.name}.{f.name}"])
+            assert f" {f.type} " in line and line.endswith(f"default {getattr(defaults, f.name)!r}"), line
+
+
+@pytest.mark.parametrize("assignment, message", [
+    ("nostep.seeds=3", "no step 'nostep'"),
+    ("arms.nope=3", "step 'arms' has no parameter nope"),
+    ("motion.rrt_time=fast", "parameter rrt_time expects float, got 'fast'"),
+    ("exchange.keep=2.5", "parameter keep expects int"),
+    ("roadmap.radius=NaN", "parameter radius expects a finite number"),
+    ("arms", "--set expects step.param=value"),
+])
+def test_every_set_is_checked_before_any_step(tmp_path, capsys, assignment, message):
+    out = tmp_path / "session"
+    assert main(["plan", "default", "--out", str(out), "--set", "arms.seeds=4", "--set", assignment]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists(), "a session folder was made for a --set that cannot run"
+
+
+def test_a_port_in_use_is_an_error_naming_it(capsys):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["workbench", "--port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert f"port {port} on 127.0.0.1 is in use" in err and "--port" in err
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_bars_end_their_line_before_a_message():
+    stream = _Terminal()
+    with Bars(stream) as bars:
+        bars.start("arms")(0.3, "left arm")
+        bars.say("a warning")
+        bars.start("pick_grasps")(0.5, "frames")
+    text = stream.getvalue()
+    before, after = text.split("a warning\n")
+    assert before.endswith("\r") and "arms" in before and "left arm" in before
+    assert "pick_grasps" in after and text.endswith("\n"), "the last bar did not end its line"
+
+
+def test_bars_print_plain_lines_off_a_terminal():
+    stream = io.StringIO()
+    with Bars(stream) as bars:
+        report = bars.start("roadmap")
+        for i in range(101):
+            report(i / 100, f"node {i}")
+    lines = stream.getvalue().splitlines()
+    assert "\r" not in stream.getvalue() and len(lines) == 11
+    assert lines[0] == "roadmap:   0% node 0" and lines[-1] == "roadmap: 100% node 100"
+
+
+def test_plan_progress_in_a_log_is_plain_lines(tmp_path):
+    run = regrasp("plan", "default", "--out", str(tmp_path / "s"), "--until", "arms")
+    assert run.returncode == 0, run.stderr
+    assert "\r" not in run.stderr
+    assert any(re.fullmatch(r"arms: 100% .*", line) for line in run.stderr.splitlines()), run.stderr
+
+
+def test_planner_never_imports_workbench():
+    """The backend stands alone: the command line that joins both halves lives in workbench/."""
+    offenders = [f"{path}:{n}" for path in sorted((PROJECT_ROOT / "planner").rglob("*.py"))
+                 for n, line in enumerate(path.read_text().splitlines(), 1)
+                 if re.match(r"\s*(import workbench|from workbench)\b", line)]
+    assert offenders == []
+
+
+def test_readme_starts_with_the_workbench_and_shows_its_picture():
+    text = (PROJECT_ROOT / "README.md").read_text()
+    first_command = text.index("```bash")
+    assert "regrasp workbench" in text[first_command:text.index("```", first_command + 7)]
+    assert text.index("regrasp workbench") < text.index("http://127.0.0.1:8080") < text.index("pytest")
+    images = re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", text)
+    assert images == ["assets/workbench.png"], images
+    image = PROJECT_ROOT / images[0]
+    assert image.is_file() and image.stat().st_size < 300_000
+    assert image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "regrasp screenshot" in text, "the README must say how its picture is made"

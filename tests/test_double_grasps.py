@@ -140,7 +140,7 @@ def test_same_seed_same_double_grasps(planned, tmp_path):
 
 
 def _plan(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "planner.cli", "plan", *args], capture_output=True, text=True, timeout=900)
+    return subprocess.run([sys.executable, "-m", "workbench.cli", "plan", *args], capture_output=True, text=True, timeout=900)
 
 
 def test_plan_until_double_grasps_prints_the_stage_table(tmp_path):
@@ -178,7 +178,7 @@ def test_object_only_the_placing_arm_reaches_fails_at_the_pick_stage(tmp_path):
 
 def test_bench_double_grasps_json(planned, tmp_path):
     out = tmp_path / "bench.json"
-    run = subprocess.run([sys.executable, "-m", "planner.cli", "bench", "double-grasps", "--seed", str(SEED), "--repeat", "2",
+    run = subprocess.run([sys.executable, "-m", "workbench.cli", "bench", "double-grasps", "--seed", str(SEED), "--repeat", "2",
                           "--json", str(out)], capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr
     figures = json.loads(out.read_text())

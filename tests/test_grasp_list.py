@@ -12,12 +12,12 @@ import pytest
 import trimesh
 from scipy.optimize import linprog
 
-from planner.cli import main
 from planner.grasp_quality import tangent_bases
 from planner.grasps import GraspList, GraspParams, compute_grasp_list, grasp_list
 from planner.results import load_result, save_result
 from planner.robot import _load
 from planner.robot_spec import load_robot_spec
+from workbench.cli import main
 
 SMALL = GraspParams(positions=30, orientations=40)
 CLEARANCE = 1.5e-3  # m: the fingertip, shrunk by this, must be clear of the object (it touches at one point)
@@ -204,6 +204,6 @@ def test_command_writes_the_json_and_names_the_hands(tmp_path, capsys):
 @pytest.mark.parametrize("hand", ["right", "left"])
 def test_default_lists_have_50_force_closed_grasps(tmp_path, hand):
     out = tmp_path / f"{hand}.json"
-    subprocess.run([sys.executable, "-m", "planner.cli", "grasps", "--hand", hand, "--no-cache", "--json", str(out)], check=True)
+    subprocess.run([sys.executable, "-m", "workbench.cli", "grasps", "--hand", hand, "--no-cache", "--json", str(out)], check=True)
     data = json.loads(out.read_text())
     assert data["outcomes"]["closed"] >= 50 and len(data["grasps"]) >= 50  # time: see `regrasp grasps`, not a test

@@ -27,7 +27,7 @@ mnt, scenario, example = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
 
 
 def cli(*args):
-    run = subprocess.run([sys.executable, "-m", "planner.cli", *args], capture_output=True, text=True)
+    run = subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True)
     return {"code": run.returncode, "stderr": run.stderr}
 
 

@@ -86,7 +86,7 @@ def started(cold_cache: Path, tmp_path: Path) -> Iterator[Callable[[list[str]], 
 
 
 def _plan(out: Path) -> list[str]:
-    return [sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(out)]
+    return [sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(out)]
 
 
 def _workbench() -> list[str]:

@@ -151,7 +151,7 @@ def test_van_der_corput_visits_every_step_once():
 def test_roadmap_command_prints_the_table_and_writes_json(tmp_path, capsys):
     import json
 
-    from planner.cli import main
+    from workbench.cli import main
 
     out = tmp_path / "roadmap.json"
     assert main(["roadmap", "--nodes", "4", "--seed", "2", "--json", str(out)]) == 0

@@ -80,14 +80,14 @@ def test_existing_session_survives_without_force(planned, default_scene):
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     with pytest.raises(RegraspError, match="already holds a session"):
         Session.create(folder, default_scene, seed=3)
-    run = subprocess.run([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(folder)],
+    run = subprocess.run([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(folder)],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2 and "--force" in run.stderr and "Traceback" not in run.stderr
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
 
 def _plan(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(out), "--seed", "5", *extra],
+    return subprocess.Popen([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(out), "--seed", "5", *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -202,3 +202,21 @@ def test_branch_keeps_the_original(planned, tmp_path):
     run_pipeline(new, params={"arms": {"seeds": 40}})
     assert new.record_of("arms")["params"]["seeds"] == 40
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_session_records_the_task_by_name_or_relative_path(tmp_path, default_scene):
+    """session.json never holds an absolute path of the machine that wrote it; old sessions that do still load."""
+    from planner.task import load_task
+
+    named = Session.create(tmp_path / "named", default_scene, seed=0)
+    assert json.loads((named.folder / MANIFEST).read_text())["task_source"] == "default"
+    own = tmp_path / "tasks" / "mine.toml"
+    own.parent.mkdir()
+    own.write_text(default_scene.source.read_text())
+    relative = Session.create(tmp_path / "runs" / "one", load_task(own), seed=0)
+    recorded = json.loads((relative.folder / MANIFEST).read_text())["task_source"]
+    assert recorded == "../../tasks/mine.toml" and str(tmp_path) not in (relative.folder / MANIFEST).read_text()
+    for old in ("/somewhere/else/assets/tasks/default.toml", "../../../../etc/passwd"):  # a note for people: never opened
+        manifest = json.loads((named.folder / MANIFEST).read_text())
+        (named.folder / MANIFEST).write_text(json.dumps({**manifest, "task_source": old}))
+        assert Session.open(named.folder).scene.source == named.folder / MANIFEST

@@ -218,11 +218,11 @@ def test_plan_refuses_a_placement_inside_an_obstacle_with_checks_message(tmp_pat
         require_valid(scene, lambda message: None)
     assert "the object's final placement penetrates vase" in str(info.value)
     out = tmp_path / "session"
-    run = subprocess.run([sys.executable, "-m", "planner.cli", "plan", str(path), "--out", str(out), "--until", "arms"],
+    run = subprocess.run([sys.executable, "-m", "workbench.cli", "plan", str(path), "--out", str(out), "--until", "arms"],
                          check=False, capture_output=True, text=True, timeout=300)
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "the object's final placement penetrates vase" in run.stderr and not out.exists()
-    check = subprocess.run([sys.executable, "-m", "planner.cli", "check", str(path)], check=False, capture_output=True, text=True,
+    check = subprocess.run([sys.executable, "-m", "workbench.cli", "check", str(path)], check=False, capture_output=True, text=True,
                            timeout=300)
     assert check.returncode == 1 and "PROBLEM: the object's final placement penetrates vase" in check.stdout
     session = Session.create(tmp_path / "direct", scene, 0)  # the workbench's way in: run_pipeline validates too
@@ -232,7 +232,7 @@ def test_plan_refuses_a_placement_inside_an_obstacle_with_checks_message(tmp_pat
 
 
 def test_check_says_what_the_reach_distance_is():
-    run = subprocess.run([sys.executable, "-m", "planner.cli", "check", "default"], check=False, capture_output=True, text=True,
+    run = subprocess.run([sys.executable, "-m", "workbench.cli", "check", "default"], check=False, capture_output=True, text=True,
                          timeout=300)
     assert run.returncode == 0, run.stderr
     assert "The distance is the closest that centre came" in run.stdout and "cm short" in run.stdout
@@ -317,7 +317,7 @@ def test_geometric_median_minimises_the_distance_sum():
 def test_grasps_and_plan_share_a_cached_list(tmp_path):
     assert PICK_STEP.seed(7) == PLACE_STEP.seed(7) and session_grasp_seed(7) != session_grasp_seed(8)
     listing = tmp_path / "list.json"
-    run = subprocess.run([sys.executable, "-m", "planner.cli", "grasps", "--task", "default", "--hand", "right", "--frames", "80",
+    run = subprocess.run([sys.executable, "-m", "workbench.cli", "grasps", "default", "--hand", "right", "--frames", "80",
                           "--seed", "5", "--json", str(listing)], check=False, capture_output=True, text=True, timeout=300)
     assert run.returncode in (0, 1), run.stderr
     computed = json.loads(listing.read_text())

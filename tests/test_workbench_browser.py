@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import io
-import socket
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -12,29 +11,20 @@ import numpy as np
 import pytest
 from PIL import Image
 from playwright.sync_api import Browser, Page
+from scipy.spatial.transform import Rotation
 
 from planner.paths import DEFAULT_TASK, PROJECT_ROOT
 from planner.session import Session
 from workbench.app import Workbench
+from workbench.screenshot import free_port as _free_port
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-    "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic",
-]
 VIEWPORT = {"width": 1024, "height": 720}
 SCENE_WIDTH = 640  # px: the left part of the page, where the 3-D view is not covered by the GUI panel
 EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"  # the example session the tests replay (copied, never written)
 CHANGED = 0.003  # fraction of the view's pixels that must change for a change to count
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+OBJECT_PIXELS = 40  # the fewest pixels the object covers when it is on screen
 
 
 def _view(page: Page) -> np.ndarray:
@@ -88,6 +78,37 @@ def _open(wb: Workbench, browser: Browser) -> Page:
     return page
 
 
+def _project(workbench: Workbench, point: np.ndarray) -> np.ndarray:
+    """Where a world point appears in a screenshot (x, y px), through the browser's camera (OpenCV convention)."""
+    camera = next(iter(workbench.server.get_clients().values())).camera
+    R = Rotation.from_quat(np.roll(camera.wxyz, -1)).as_matrix()  # camera to world
+    x, y, z = R.T @ (point - camera.position)
+    assert z > 0, "the point is behind the camera"
+    f = camera.image_height / 2 / np.tan(camera.fov / 2)
+    u, v = camera.image_width / 2 + f * x / z, camera.image_height / 2 + f * y / z
+    return np.array([u * VIEWPORT["width"] / camera.image_width, v * VIEWPORT["height"] / camera.image_height])
+
+
+def _object_pixels(wb: Workbench, page: Page) -> np.ndarray:
+    """(rows, cols) bool: the pixels the workbench's object covers, the view with it shown against the view without
+    (taken again until the view with it is the same before and after, so nothing else changed meanwhile)."""
+    shown_object = wb.scene_layer.object
+    for _ in range(3):
+        shown = _settled(page)
+        shown_object.visible = False
+        try:
+            hidden = _settled(page)
+        finally:
+            shown_object.visible = True
+        if _changed(_settled(page), shown) < 1e-4:
+            break
+    else:
+        raise AssertionError("the view kept changing while the object was hidden and shown again")
+    mask = np.abs(shown - hidden).max(axis=2) > 24
+    assert mask.sum() >= OBJECT_PIXELS, f"the object covers {mask.sum()} pixels: not on screen"
+    return mask
+
+
 def _run_up_to_from_the_gui(wb: Workbench, page: Page, step: str, timeout: float = 240) -> None:
     """Choose `step` in the session panel, click "Run up to this step" and wait until the step's layer is drawn."""
     panel = wb.session_panel
@@ -122,14 +143,19 @@ def page(workbench: Workbench, browser: Browser) -> Iterator[Page]:
     page.close()
 
 
-def test_robot_is_drawn(workbench: Workbench, page: Page) -> None:
+def _assert_robot_visible(wb: Workbench, page: Page) -> None:
+    """The view is not empty and hiding the robot changes more than 1 % of it (the robot is shown again after)."""
     with_robot = _settled(page)
     assert len(np.unique(with_robot.reshape(-1, 3), axis=0)) > 100, "the 3-D view looks empty"
-    workbench.show_robot.value = False
+    wb.show_robot.value = False
     try:
         assert _until_changed(page, with_robot) > 0.01, "hiding the robot changed almost nothing on screen"
     finally:
-        workbench.show_robot.value = True
+        wb.show_robot.value = True
+
+
+def test_robot_is_drawn(workbench: Workbench, page: Page) -> None:
+    _assert_robot_visible(workbench, page)
 
 
 def test_collision_checkbox_shows_collision_geometry(workbench: Workbench, page: Page) -> None:

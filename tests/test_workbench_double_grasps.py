@@ -48,6 +48,8 @@ def workbench(tmp_path_factory) -> Iterator[Workbench]:
     shutil.copytree(EXAMPLE, folder)
     wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=folder.parent)
     wb.session_layers.layers["roadmap"].visible = False  # thousands of edges: software WebGL takes seconds a frame
+    for name in ONLINE:  # only the last step's layer (motion) is shown at first: these tests look at the online steps
+        wb.layer_toggles.boxes[name].value = True
     yield wb
     wb.close()
 

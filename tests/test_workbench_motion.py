@@ -14,8 +14,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from scipy.spatial.transform import Rotation
-from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _changed, _free_port, _settled, _until_changed, _view, _wait_for
+from test_workbench_browser import (
+    CHANGED,
+    EXAMPLE,
+    VIEWPORT,
+    _changed,
+    _free_port,
+    _object_pixels,
+    _project,
+    _settled,
+    _until_changed,
+    _view,
+    _wait_for,
+)
 
 from planner.motion.result import PHASES, Motion
 from planner.session import Session
@@ -27,7 +38,6 @@ from workbench.layers.stages import FAILURE_COLOR
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 CARRY, PLACE = PHASES.index("Carry"), PHASES.index("Place")
-OBJECT_PIXELS = 40  # fewest pixels of the object on screen for its position to be measured
 NEAR = 30.0  # px: the object's pixels must be centred this close to where its saved pose projects
 
 
@@ -37,7 +47,7 @@ def folder(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("sessions") / "example"
     shutil.copytree(EXAMPLE, folder)
     if "motion" not in Session.open(folder).finished():
-        run = subprocess.run([sys.executable, "-m", "planner.cli", "plan", "default", "--out", str(folder), "--resume"],
+        run = subprocess.run([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(folder), "--resume"],
                              check=False, capture_output=True, text=True, timeout=600)
         assert run.returncode == 0, run.stderr[-2000:]
     return folder
@@ -68,35 +78,9 @@ def _middle_held(result: Motion, phase: int) -> int:
     return int(samples[len(samples) // 2])
 
 
-def _project(workbench: Workbench, point: np.ndarray) -> np.ndarray:
-    """Where a world point appears in a screenshot (x, y px), through the browser's camera (OpenCV convention)."""
-    camera = next(iter(workbench.server.get_clients().values())).camera
-    R = Rotation.from_quat(np.roll(camera.wxyz, -1)).as_matrix()  # camera to world
-    x, y, z = R.T @ (point - camera.position)
-    assert z > 0, "the point is behind the camera"
-    f = camera.image_height / 2 / np.tan(camera.fov / 2)
-    u, v = camera.image_width / 2 + f * x / z, camera.image_height / 2 + f * y / z
-    return np.array([u * VIEWPORT["width"] / camera.image_width, v * VIEWPORT["height"] / camera.image_height])
-
-
-def _object_on_screen(workbench: Workbench, page: Page, layer: MotionLayer) -> np.ndarray:
-    """The centre (x, y px) of the pixels the layer's object covers: the view with it shown, against the view without
-    (taken again until the view with it is the same before and after, so nothing else changed meanwhile)."""
-    assert layer.object is not None
-    for _ in range(3):
-        shown = _settled(page)
-        layer.object.visible = False
-        try:
-            hidden = _settled(page)
-        finally:
-            layer.object.visible = True
-        if _changed(_settled(page), shown) < 1e-4:
-            break
-    else:
-        raise AssertionError("the view kept changing while the object was hidden and shown again")
-    mask = np.abs(shown - hidden).max(axis=2) > 24
-    assert mask.sum() >= OBJECT_PIXELS, f"the object covers {mask.sum()} pixels: not on screen"
-    rows, cols = np.nonzero(mask)
+def _object_on_screen(workbench: Workbench, page: Page) -> np.ndarray:
+    """The centre (x, y px) of the pixels the workbench's object covers (the motion layer moves it)."""
+    rows, cols = np.nonzero(_object_pixels(workbench, page))
     return np.array([cols.mean(), rows.mean()])
 
 
@@ -154,7 +138,7 @@ def test_object_moves_with_the_hand(workbench: Workbench, page: Page, layer: Mot
             layer.timeline.value = i
             assert _wait_for(lambda i=i: np.allclose(workbench.q, r.q[i])), "the timeline did not pose the robot"
             assert PHASES[phase] in layer.now.content
-            seen, expected = _object_on_screen(workbench, page, layer), _project(workbench, _object_centre(layer, i))
+            seen, expected = _object_on_screen(workbench, page), _project(workbench, _object_centre(layer, i))
             assert np.linalg.norm(seen - expected) < NEAR, f"{PHASES[phase]}: object seen at {seen}, its pose projects to {expected}"
             centres.append(seen)
         moved = np.linalg.norm(centres[1] - centres[0])

@@ -21,6 +21,7 @@ def workbench(tmp_path_factory) -> Iterator[Workbench]:
     folder = tmp_path_factory.mktemp("sessions") / "example"
     shutil.copytree(EXAMPLE, folder)
     wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=folder.parent)
+    wb.focus_step("roadmap")  # hidden at first (only the last step, motion, is shown)
     yield wb
     wb.close()
 
@@ -76,7 +77,7 @@ def test_query_animates_the_path_to_a_node(workbench: Workbench, page: Page, lay
     before = _settled(page)
     posed: list[np.ndarray] = []
     pose = workbench.pose_robot
-    monkeypatch.setattr(workbench, "pose_robot", lambda q: (posed.append(np.array(q)), pose(q)))
+    monkeypatch.setattr(workbench, "pose_robot", lambda q, *where: (posed.append(np.array(q)), pose(q, *where)))
     page.get_by_role("button", name="Plan to node").click()
     # "Path found" stays in the status while animating and after; the animation may finish between two polls
     assert _wait_for(lambda: "Path found" in layer.status.content or "No path" in layer.status.content, 120), layer.status.content

@@ -64,7 +64,7 @@ def workbench(sessions_dir: Path, example: Session) -> Iterator[Workbench]:
 def test_regrasp_replay_draws_the_saved_results(browser: Browser, example: Session) -> None:
     """`regrasp replay` on the example: the step table is in the page and hiding the step layers changes the view."""
     port = _free_port()
-    server = subprocess.Popen([sys.executable, "-m", "planner.cli", "replay", str(EXAMPLE), "--port", str(port)],
+    server = subprocess.Popen([sys.executable, "-m", "workbench.cli", "replay", str(EXAMPLE), "--port", str(port)],
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     page = browser.new_page(viewport=VIEWPORT)
     try:
@@ -233,6 +233,6 @@ def test_replay_of_a_bad_session_exits_2(tmp_path: Path) -> None:
     manifest = json.loads((bad / MANIFEST).read_text())
     manifest["format_version"] = 99
     (bad / MANIFEST).write_text(json.dumps(manifest))
-    run = subprocess.run([sys.executable, "-m", "planner.cli", "replay", str(bad), "--port", str(_free_port())],
+    run = subprocess.run([sys.executable, "-m", "workbench.cli", "replay", str(bad), "--port", str(_free_port())],
                          capture_output=True, text=True, timeout=60)
     assert run.returncode == 2 and "newer regrasp" in run.stderr and "Traceback" not in run.stderr

@@ -6,6 +6,7 @@ concern (the session's steps through `session_layers`; the Session panel runs st
 """
 from __future__ import annotations
 
+import sys
 import threading
 from pathlib import Path
 
@@ -13,29 +14,33 @@ import numpy as np
 import viser
 
 from planner.collision import CollisionChecker, build_collision_model
+from planner.errors import RegraspError
 from planner.forked import sigterm_unwinds, stop_pools
-from planner.paths import ASSETS, DEFAULT_TASK
-from planner.session import Session
+from planner.paths import DEFAULT_TASK, TASKS_DIR
+from planner.session import MANIFEST, Session
 from planner.task import Scene, load_task
 
 from .collision_layer import CollisionLayer
+from .layer_toggles import LayerToggles
 from .notify import error_text
 from .robot_layer import RobotLayer
 from .scene_layer import SceneLayer
 from .session_layers import SessionLayers
-from .session_panel import SessionPanel
+from .session_panel import INITIAL, MOVED, OTHER, SessionPanel
 from .session_store import SESSIONS_DIR
-from .view import setup_view
+from .view import CAMERA_LOOK_AT, CAMERA_POSITION, close_up, move_cameras, setup_view
 
-TASKS_DIR = ASSETS / "tasks"
 MAX_LISTED_PAIRS = 8
+VIEWS = ("overview", "start", "handover", "goal")  # camera buttons: the scene, the object at its start, the exchange, its goal
+GRASP_CLOSE_UP = 0.6  # m from the object when a grasp is chosen
 
 
 def task_choices(current: Path) -> dict[str, Path]:
     """Dropdown label -> file for the tasks in assets/tasks, plus the current task if it lives elsewhere."""
     choices = {p.stem: p.resolve() for p in sorted(TASKS_DIR.glob("*.toml"))}
     if current.resolve() not in choices.values():
-        choices[str(current)] = current.resolve()
+        label = f"session {current.parent.name}" if current.name == MANIFEST else str(current)  # a replayed session's task
+        choices[label] = current.resolve()
     return choices
 
 
@@ -49,6 +54,9 @@ class Workbench:
         scene = opened.scene if opened is not None else load_task(task or DEFAULT_TASK)
         self.host = host
         self.server = viser.ViserServer(host, port, label="regrasp", verbose=False)
+        if port and self.server.get_port() != port:  # viser moves on to the next free port; a person asked for this one
+            self.server.stop()
+            raise RegraspError(f"port {port} on {host} is in use (another workbench?): stop it, or choose another with --port")
         self._lock = threading.RLock()
         self._generation = 0
         self.collision_ready = threading.Event()
@@ -61,8 +69,12 @@ class Workbench:
         self.session_layers: SessionLayers | None = None
         self._checker: CollisionChecker | None = None
         self._sliders: viser.GuiFolderHandle | None = None
+        self.layer_toggles: LayerToggles | None = None
+        self._dimmed = False
+        self._grasp_focus: str | None = None  # the grasp list framed while dimmed
         self._slider_of: dict[int, viser.GuiSliderHandle] = {}
         self._syncing_choices = False  # True while _show rewrites the task dropdown: its callbacks must not load a task
+        self._posing = False  # True while pose_robot moves the sliders: their callbacks must not redraw joint by joint
         setup_view(self.server)
         self._build_gui(sessions_dir)
         self._show(scene, opened)
@@ -93,7 +105,9 @@ class Workbench:
         with gui.add_folder("View"):
             self.show_robot = gui.add_checkbox("Show robot", True)
             self.show_collision = gui.add_checkbox("Show collision geometry", False)
-            self.show_steps = gui.add_checkbox("Show step results", True)
+            self.show_steps = gui.add_checkbox("Show step results", True, hint="Every step layer at once (see Layers)")
+            self.views = gui.add_button_group("Camera", VIEWS)
+        self.layers_folder = gui.add_folder("Layers")
         self.session_panel = SessionPanel(self, sessions_dir)
         with gui.add_folder("Joints") as self._joints:
             parts = self.scene.robot.part_names()
@@ -105,6 +119,7 @@ class Workbench:
         self.show_robot.on_update(lambda e: self._set_robot_visible(e.target.value))
         self.show_collision.on_update(lambda e: self._set_collision_shown(e.target.value))
         self.show_steps.on_update(lambda e: self._set_steps_visible(e.target.value))
+        self.views.on_click(lambda e: self.show_view(e.target.value, e.client))
         self.part.on_update(lambda _: self._rebuild_sliders())
         self.reset_button.on_click(lambda _: self.reset())
 
@@ -144,14 +159,78 @@ class Workbench:
                 self._show(session.scene, session)
 
     def _draw_session(self, session: Session | None) -> None:
-        """Replace the step layers with those of `session` (drawn from its saved results) and refresh the panel."""
+        """Replace the step layers with those of `session` (drawn from its saved results), the last one in focus, and
+        refresh the panel."""
         if self.session_layers is not None:
             self.session_layers.remove()
+        if self.layer_toggles is not None:
+            self.layer_toggles.remove()
         self.session = session
         self.session_layers = SessionLayers(self.server, session, workbench=self) if session is not None else None
+        self.layer_toggles = None
         if self.session_layers is not None:
             self.session_layers.visible = self.show_steps.value
+            last = next(iter(reversed(self.session_layers.layers)), None)
+            self.layer_toggles = LayerToggles(self.server.gui, self.layers_folder, self.session_layers, last)
         self.session_panel.shown(session, self.session_layers)
+
+    def focus_step(self, step: str) -> None:
+        """Show only the layer of `step` (the others hidden, nothing dimmed)."""
+        with self._lock:
+            self.dim(False)
+            if self.layer_toggles is not None:
+                self.layer_toggles.focus(step)
+
+    def focus_grasp(self, step: str, object_pose: np.ndarray) -> None:
+        """A grasp chosen in the layer of `step`: that layer alone, the robot and obstacles dimmed, the object framed (once:
+        the camera stays put while more ranks of the same list are chosen)."""
+        with self._lock:
+            if self._dimmed and self._grasp_focus == step:
+                return
+            if self.layer_toggles is not None:
+                self.layer_toggles.focus(step)
+            self.dim(True)
+            self._grasp_focus = step
+            if self.scene_layer is not None:
+                move_cameras(self.server, *close_up(self.scene_layer.centre(object_pose), GRASP_CLOSE_UP))
+
+    def dim(self, dimmed: bool) -> None:
+        """Draw the robot and the obstacles translucent (something else is in focus), or opaque again."""
+        with self._lock:
+            if dimmed == self._dimmed:
+                return
+            self._dimmed = dimmed
+            for layer in (self.robot_layer, self.scene_layer):
+                if layer is not None:
+                    layer.dim(dimmed)
+
+    def exchange_point(self) -> np.ndarray | None:
+        """Where the object is handed over: the shown double grasp's exchange pose, else the exchange step's best position."""
+        layers = self.session_layers.layers if self.session_layers is not None else {}
+        pairs = layers.get("double_grasps")
+        if pairs is not None and pairs.result is not None and len(pairs.result) and self.scene_layer is not None:
+            return self.scene_layer.centre(pairs.result.object_exchange[pairs.index])
+        if self.session is not None and "exchange" in self.session.finished():
+            exchange = self.session.result("exchange")
+            return np.asarray(exchange.position) if len(exchange.best) else None
+        return None
+
+    def show_view(self, name: str, client: viser.ClientHandle | None = None) -> list[threading.Thread]:
+        """Glide every camera to a view (see VIEWS); one the session cannot give yet (no exchange) says so to `client`."""
+        with self._lock:
+            self.dim(False)
+            if name == "overview":
+                target: tuple[np.ndarray, np.ndarray] | None = (np.array(CAMERA_POSITION), np.array(CAMERA_LOOK_AT))
+            else:
+                assert self.scene_layer is not None
+                point = {"start": lambda: self.scene_layer.centre(self.scene.object_initial), "handover": self.exchange_point,
+                         "goal": lambda: self.scene_layer.centre(self.scene.object_final)}[name]()
+                target = close_up(point) if point is not None else None
+        if target is None:
+            if client is not None:
+                client.add_notification("No exchange yet", "run the exchange step first", color="yellow", auto_close_seconds=5.0)
+            return []
+        return move_cameras(self.server, *target)
 
     def _show(self, scene: Scene, session: Session | None = None) -> None:
         """Replace the drawn task (and session), reset the robot and start building the collision model."""
@@ -173,7 +252,9 @@ class Workbench:
                 self.task_choice.value = self._label_of(scene.source)
             finally:
                 self._syncing_choices = False
-            self.task_path.value = str(scene.source)
+            # a replayed session's task file is its session.json: show the task it came from (a name or a relative path)
+            self.task_path.value = session.manifest.get("task_source", "") if session is not None and scene is session.scene \
+                else str(scene.source)
             self.task_info.content = f"**{scene.name}** — {scene.description}" if scene.description else f"**{scene.name}**"
             self.part.options = tuple(scene.robot.part_names())
             self._rebuild_sliders()
@@ -217,8 +298,10 @@ class Workbench:
                 slider.on_update(lambda e, i=i: self.set_joint(i, e.target.value))
 
     def set_joint(self, index: int, value: float) -> None:
-        """Move one joint (q index, clipped to its limits), keep its slider in step and redraw."""
+        """Move one joint (q index, clipped to its limits), keep its slider in step and redraw; "Robot at" says so."""
         with self._lock:
+            if self._posing:
+                return
             robot = self.scene.robot
             value = float(np.clip(value, robot.lower[index], robot.upper[index]))
             slider = self._slider_of.get(index)
@@ -226,17 +309,28 @@ class Workbench:
                 slider.value = value  # its callback comes back here with the same value
                 return
             self.q[index] = value
+            self.session_panel.showing(MOVED)
             self._refresh()
 
     def reset(self) -> None:
-        """Back to the task's initial configuration."""
-        self.pose_robot(self.scene.q_initial)
+        """Back to the task's initial configuration, the object on the desk at its initial placement."""
+        self.pose_robot(self.scene.q_initial, self.scene.object_initial, INITIAL)
 
-    def pose_robot(self, q: np.ndarray) -> None:
-        """Put the robot at configuration q: sliders follow, collisions are checked."""
+    def pose_robot(self, q: np.ndarray, object_pose: np.ndarray | None = None, label: str = OTHER) -> None:
+        """Put the robot at configuration q and the object at `object_pose` (None: where it is); the joint sliders follow in
+        place, "Robot at" shows `label`, collisions are checked."""
         with self._lock:
+            self.dim(False)
             self.q = np.array(q, dtype=float)
-            self._rebuild_sliders()
+            self._posing = True
+            try:
+                for i, slider in self._slider_of.items():
+                    slider.value = float(self.q[i])
+            finally:
+                self._posing = False
+            if object_pose is not None and self.scene_layer is not None:
+                self.scene_layer.place_object(object_pose)
+            self.session_panel.showing(label)
             self._refresh()
 
     def _set_robot_visible(self, visible: bool) -> None:
@@ -273,6 +367,7 @@ class Workbench:
 def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 8080, session: str | Path | None = None) -> None:
     """Start the workbench (on a task, or replaying a saved session) and serve until interrupted (Ctrl-C)."""
     workbench = Workbench(task, host, port, session=session)
+    print(f"regrasp workbench: open {workbench.url} (Ctrl-C stops it)", file=sys.stderr, flush=True)
     try:
         with sigterm_unwinds():  # SIGTERM ends the server like Ctrl-C: the workers of a running step are killed too
             workbench.server.sleep_forever()

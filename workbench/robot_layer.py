@@ -9,6 +9,7 @@ from planner.robot import Robot
 
 from .meshes import coal_to_trimesh, poses_wxyz
 from .rooted import Rooted
+from .scene_layer import DIM_OPACITY
 
 
 class RobotLayer(Rooted):
@@ -28,6 +29,12 @@ class RobotLayer(Rooted):
             self.handles.append(server.scene.add_mesh_simple(
                 f"{root}/{obj.name}", mesh.vertices, mesh.faces, color=rgb, cast_shadow=False, receive_shadow=False))
         self.update(q)
+
+    def dim(self, dimmed: bool) -> None:
+        """Draw the robot translucent (so that what is in focus stands out), or opaque again."""
+        with self.server.atomic():
+            for handle in self.handles:
+                handle.opacity = DIM_OPACITY if dimmed else None
 
     def update(self, q: np.ndarray) -> None:
         """Pose every link at q in one atomic batch (viser sends only the poses that changed)."""

@@ -3,12 +3,12 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 import viser
 
 from planner.session import Session
 
 from .layers import LAYERS, StepLayer
+from .layers.base import Pose
 from .notify import error_text
 from .rooted import Rooted
 
@@ -35,9 +35,9 @@ class SessionLayers(Rooted):
                     continue
                 self.layers[name] = layer
 
-    def poses(self) -> dict[str, np.ndarray]:
-        """The robot configurations every layer offers, by label, in pipeline order."""
-        return {label: q for layer in self.layers.values() for label, q in layer.poses.items()}
+    def poses(self) -> dict[str, Pose]:
+        """The whole poses every layer offers, by label, in pipeline order."""
+        return {label: pose for layer in self.layers.values() for label, pose in layer.poses.items()}
 
     def remove(self) -> None:
         """Take every layer (its scene nodes and GUI) out of the workbench."""

@@ -23,6 +23,7 @@ from planner.session import Session
 from planner.steps import Progress, Step
 
 from .export import scene_html
+from .layers.base import Pose
 from .notify import error_text, notify_all
 from .param_inputs import ParamInputs, recorded_params
 from .session_layers import SessionLayers
@@ -34,13 +35,16 @@ from .session_store import (
     scratch_copy,
     scratch_folder,
 )
-from .step_table import step_table
+from .step_table import step_details, step_table
 
 if TYPE_CHECKING:
     from .app import Workbench
 
 INITIAL = "task: initial configuration"
+MOVED = "joints moved by hand"
+OTHER = "another configuration"
 NO_SESSIONS = "(no saved sessions)"
+NO_STEP = "(no step has run)"
 
 
 class SessionPanel:
@@ -51,14 +55,19 @@ class SessionPanel:
         self.sessions_dir = sessions_dir
         self.job: threading.Thread | None = None
         self._scratch: Path | None = None  # the session folder the GUI created; the only one runs write into
-        self._poses: dict[str, np.ndarray] = {}
+        self._poses: dict[str, Pose] = {}
+        self._syncing_robot_at = False  # True while `showing` rewrites "Robot at": its callback must not pose the robot
         self._params: ParamInputs | None = None
         gui = workbench.server.gui
         names = tuple(s.name for s in PIPELINE)
         with gui.add_folder("Session"):
             self.message = gui.add_markdown("", visible=False)
             self.table = gui.add_markdown(step_table(None))
-            self.robot_at = gui.add_dropdown("Robot at", (INITIAL,), hint="Show the robot at a configuration a step found")
+            self.step = gui.add_dropdown("Step", (NO_STEP,), hint="A finished step: its layer alone in view, its details below")
+            with gui.add_folder("Step details", expand_by_default=False):
+                self.details = gui.add_markdown("")
+            self.robot_at = gui.add_dropdown("Robot at", (INITIAL,), hint="The robot and the object as a step found them; "
+                                             "says what is shown")
             self.name = gui.add_text("Name", "untitled")
             self.save_button = gui.add_button("Save", hint="Save the current session as sessions/<name>")
             self.saved = gui.add_dropdown("Saved", self._saved_options())
@@ -78,6 +87,7 @@ class SessionPanel:
         self._buttons = (self.save_button, self.load_button, self.next_button, self.until_button, self.rerun_button,
                          workbench.load_button, workbench.task_choice)
         self.robot_at.on_update(lambda e: self._pose_chosen(e.target.value))
+        self.step.on_update(lambda e: self._step_chosen(e.target.value))
         self.save_button.on_click(lambda e: self._save_clicked(e.client))
         self.load_button.on_click(lambda _: self._load_clicked())
         self.next_button.on_click(lambda _: self.run_next())
@@ -92,12 +102,22 @@ class SessionPanel:
     def shown(self, session: Session | None, layers: SessionLayers | None) -> None:
         """Refresh the panel for the session the workbench now draws (None: just a task)."""
         self.table.content = step_table(session)
+        finished = session.finished() if session is not None else []
+        drawn = [name for name in finished if layers is not None and name in layers.layers]
+        self.step.options = tuple(finished) or (NO_STEP,)
+        self.step.value = (drawn or finished or [NO_STEP])[-1]  # the step in focus: the last one drawn
+        self._step_chosen(self.step.value)
         self.saved.options = self._saved_options()
-        self._poses = {INITIAL: self.wb.scene.q_initial, **(layers.poses() if layers is not None else {})}
+        scene = self.wb.scene
+        self._poses = {INITIAL: Pose(scene.q_initial, scene.object_initial), **(layers.poses() if layers is not None else {})}
         for name, message in (layers.errors if layers is not None else {}).items():
             self._say(f"Could not draw {name}", message, error=True)
-        self.robot_at.options = tuple(self._poses)
-        self.robot_at.value = INITIAL
+        self._syncing_robot_at = True  # new options must not move the robot: a run keeps it where it was
+        try:
+            self.robot_at.options = tuple(self._poses)
+        finally:
+            self._syncing_robot_at = False
+        self.showing(INITIAL if np.array_equal(self.wb.q, scene.q_initial) else OTHER)
         if session is not None and session.folder != self._scratch:
             self.name.value = session.folder.name
         self._rebuild_params()
@@ -112,9 +132,31 @@ class SessionPanel:
     def _saved_options(self) -> tuple[str, ...]:
         return tuple(list_sessions(self.sessions_dir)) or (NO_SESSIONS,)
 
+    def _step_chosen(self, name: str) -> None:
+        """Show a finished step's details and its layer alone."""
+        session = self.wb.session
+        if session is None or name not in session.finished():
+            self.details.content = "*No step has run yet.*"
+            return
+        self.details.content = step_details(session, name)
+        self.wb.focus_step(name)
+
     def _pose_chosen(self, label: str) -> None:
-        if label in self._poses:
-            self.wb.pose_robot(self._poses[label])
+        if label in self._poses and not self._syncing_robot_at:
+            pose = self._poses[label]
+            self.wb.pose_robot(pose.q, pose.object_pose, label)
+
+    def showing(self, label: str) -> None:
+        """Make "Robot at" say what the robot is shown at (a label it does not offer yet is added)."""
+        if self.robot_at.value == label:
+            return
+        self._syncing_robot_at = True
+        try:
+            if label not in self.robot_at.options:
+                self.robot_at.options = (*self._poses, label)
+            self.robot_at.value = label
+        finally:
+            self._syncing_robot_at = False
 
     def _rebuild_params(self) -> None:
         """Inputs for the chosen step's parameters, starting at the values the current session used."""

@@ -5,7 +5,7 @@ import numpy as np
 
 from planner.arms import ArmAssignment
 
-from .base import StepLayer
+from .base import Pose, StepLayer
 
 ARM_COLORS = ((40, 110, 240), (230, 90, 30), (30, 170, 80), (170, 60, 200))  # by the arm's index in the robot spec
 HALO_RADIUS = 0.17  # m: around the statuette-sized object
@@ -31,5 +31,5 @@ class ArmsLayer(StepLayer):
                                             position=centre, cast_shadow=False, receive_shadow=False)
             self.server.scene.add_line_segments(f"{node}/stem", np.array([[centre, top]]), color, thickness=0.008)
             self.server.scene.add_label(f"{node}/label", f"{arm} arm {role}", position=top, anchor="bottom-center")
-        self.poses = {f"arms: {result.picking_arm} arm picks (q_pick)": result.q_pick,
-                      f"arms: {result.placing_arm} arm places (q_place)": result.q_place}
+        self.poses = {f"arms: {result.picking_arm} arm picks (q_pick)": Pose(result.q_pick, scene.object_initial),
+                      f"arms: {result.placing_arm} arm places (q_place)": Pose(result.q_place, scene.object_final)}

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -14,8 +15,16 @@ from planner.task import Scene
 from ..rooted import Rooted
 
 
+@dataclass(frozen=True, eq=False)
+class Pose:
+    """A whole pose a step found: the robot's configuration and where the object is then (on the desk, in a hand, in both)."""
+
+    q: np.ndarray
+    object_pose: np.ndarray  # 4x4, world frame
+
+
 class StepLayer(Rooted, ABC):
-    """Draws one step's result; `update(result)` (re)draws it and fills `poses`: robot configurations worth showing, by label."""
+    """Draws one step's result; `update(result)` (re)draws it and fills `poses`: whole poses worth showing, by label."""
 
     def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
         super().__init__(server, root)
@@ -24,8 +33,13 @@ class StepLayer(Rooted, ABC):
         self.workbench = workbench  # the live Workbench whose robot a layer may pose; None in an HTML export
         self.session = session  # the drawn Session: a layer reads the earlier steps' results it needs from it
         self.name = root
-        self.poses: dict[str, np.ndarray] = {}
+        self.poses: dict[str, Pose] = {}
         self.folder: viser.GuiFolderHandle | None = None  # the layer's GUI, if it has one: removed with the layer
+
+    @property
+    def step(self) -> str:
+        """The name of the step this layer draws (its root's last part)."""
+        return self.name.rsplit("/", 1)[-1]
 
     def earlier(self, name: str) -> Any:
         """An earlier step's result from the drawn session (e.g. the grasp lists that a later step refers to by rank)."""

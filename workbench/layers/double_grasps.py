@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import viser
 
 from planner.double_grasps import DoubleGrasps
@@ -16,7 +17,7 @@ from planner.task import Scene
 from ..meshes import matrix_wxyz
 from ..scene_layer import OBJECT_COLOR
 from .arms import ARM_COLORS
-from .base import StepLayer
+from .base import Pose, StepLayer
 from .hands import HandMeshes
 from .stages import stages_markdown
 
@@ -55,7 +56,7 @@ class DoubleGraspsLayer(StepLayer):
         self.pair = self.robot_at = None
         if len(result):
             self._draw_object(result)
-            self.poses = {f"double grasps: pair 1 at {phase} ({attr})": getattr(result, attr)[0] for phase, attr in PHASES.items()}
+            self.poses = {self.label(0, phase): self.pose(0, phase) for phase in PHASES}
         self._build_gui(result)
         if len(result):
             self.select(0)
@@ -111,9 +112,22 @@ class DoubleGraspsLayer(StepLayer):
         if self.phase is not None:
             self.show_phase(self.phase)
 
+    @staticmethod
+    def label(index: int, phase: str) -> str:
+        """The "Robot at" label of pair `index` at `phase`."""
+        return f"double grasps: pair {index + 1} at {phase} ({PHASES[phase]})"
+
+    def pose(self, index: int, phase: str) -> Pose:
+        """Pair `index` at `phase`: the robot's configuration, the object on the desk, between both hands or at its goal."""
+        r = self.result
+        assert r is not None
+        where = {"grasp": self.scene.object_initial, "exchange": r.object_exchange[index], "place": self.scene.object_final}
+        return Pose(getattr(r, PHASES[phase])[index], np.asarray(where[phase], float))
+
     def show_phase(self, name: str) -> None:
-        """Put the workbench's robot at the shown pair's grasp, exchange or place configuration (see PHASES)."""
+        """Put the workbench's robot at the shown pair's grasp, exchange or place configuration (see PHASES), object included."""
         self.phase = name
         if self.workbench is None or self.result is None or not len(self.result):
             return
-        self.workbench.pose_robot(getattr(self.result, PHASES[name])[self.index])
+        pose = self.pose(self.index, name)
+        self.workbench.pose_robot(pose.q, pose.object_pose, self.label(self.index, name))

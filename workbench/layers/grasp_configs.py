@@ -10,7 +10,7 @@ from planner.grasp_configs import GraspConfigs
 from planner.grasps import GraspList
 from planner.reach import grasp_centre
 
-from .base import StepLayer
+from .base import Pose, StepLayer
 from .stages import stages_markdown
 
 KEPT_COLOR = (30, 180, 60)
@@ -58,7 +58,7 @@ class GraspConfigsLayer(StepLayer):
                                                     np.repeat(colors[:, None], 2, axis=1), thickness=0.003)
             if len(configs.rank):
                 best = int(np.argmax(configs.score))
-                self.poses[f"grasp configs: best {role} (rank {configs.rank[best] + 1})"] = configs.q[best]
+                self.poses[f"grasp configs: best {role} (rank {configs.rank[best] + 1})"] = Pose(configs.q[best], np.asarray(T, float))
             kept, clear = len(configs.rank), int(env_free.sum())
             lines.append(f"- **{role}** ({configs.arm} hand, {placement} pose): {kept} with a configuration, "
                          f"{clear - kept} clear only, {len(env_free) - clear} removed")

@@ -17,8 +17,9 @@ from planner.session import Session
 from planner.task import Scene
 
 from ..meshes import matrix_wxyz
+from .arms import ARM_COLORS
 from .base import StepLayer
-from .hands import HandMeshes
+from .hands import HAND_STYLE, HandMeshes
 
 POINT_SIZE = 0.004  # m
 CONTACT_COLOR = (230, 30, 30)
@@ -79,8 +80,7 @@ class GraspsLayer(StepLayer):
         self.remove_folder()
         self.result = result
         scene = self.scene
-        T = scene.object_initial if self.placement == "initial" else scene.object_final
-        wxyz, xyz = matrix_wxyz(np.asarray(T, float))
+        wxyz, xyz = matrix_wxyz(self.object_pose)
         obj_node = f"{self.name}/object"
         self.server.scene.add_frame(obj_node, show_axes=False, wxyz=wxyz, position=xyz)
         hand = load_hand_model(hand_spec_of(scene.robot.spec, result.hand))
@@ -88,7 +88,9 @@ class GraspsLayer(StepLayer):
         model = object_model(scene.object_mesh, GraspParams().point_step * min(result.tip_radius))
         self.server.scene.add_point_cloud(f"{obj_node}/points", model.points.astype(np.float32), leaf_colors(model.leaf_ids()),
                                           point_size=POINT_SIZE, point_shape="circle", precision="float32")
-        self.hand = HandMeshes(self.server, f"{obj_node}/hand", hand, visible=False)
+        arms = scene.robot.spec.arm_names
+        color = ARM_COLORS[arms.index(result.hand) % len(ARM_COLORS)] if result.hand in arms else HAND_STYLE[0]
+        self.hand = HandMeshes(self.server, f"{obj_node}/hand", hand, color=color, opacity=1.0, visible=False)
         self._sphere_handles = []
         for i, ws in enumerate(hand_workspaces(hand, GraspParams().workspace())):
             if len(ws.radii) == 0:
@@ -110,10 +112,21 @@ class GraspsLayer(StepLayer):
             if len(result):
                 labels = self.rank_labels(result)
                 self.rank = gui.add_dropdown("Rank", labels, initial_value=labels[0], hint="Grasps best first: pick one to see it")
-                self.rank.on_update(lambda _: self.show(self.rank_of(self.rank.value)))
+                self.rank.on_update(self._rank_chosen)
             self.show_spheres = gui.add_checkbox("Finger sphere hierarchies", False)
             self.show_spheres.on_update(lambda _: self._set_spheres_visible(self.show_spheres.value))
             self.scores = gui.add_markdown(self.summary(result))
+
+    @property
+    def object_pose(self) -> np.ndarray:
+        """Where the list is drawn: the object's initial or final placement."""
+        return np.asarray(self.scene.object_initial if self.placement == "initial" else self.scene.object_final, float)
+
+    def _rank_chosen(self, event: viser.GuiEvent) -> None:
+        """Show the chosen rank; chosen by a person, it also gets the focus: the rest dimmed, the object framed."""
+        self.show(self.rank_of(event.target.value))
+        if event.client is not None and self.workbench is not None:
+            self.workbench.focus_grasp(self.step, self.object_pose)
 
     @staticmethod
     def rank_labels(result: GraspList) -> tuple[str, ...]:

@@ -26,6 +26,8 @@ from ..scene_layer import OBJECT_COLOR
 from .base import StepLayer
 from .stages import FAILURE_COLOR
 
+TIMELINE = "motion: the timeline's sample"  # what "Robot at" says when the timeline posed the robot
+
 PHASE_COLORS = ((0, 170, 170), (90, 60, 220), (200, 50, 200), (110, 110, 110))  # Grasp, Carry, Place, Rest
 PHASE_COLOR_NAMES = ("teal", "violet", "magenta", "grey")
 ROUTE_THICKNESS = 0.004  # m
@@ -98,12 +100,12 @@ class MotionLayer(StepLayer):
         self.timeline = self.speed = self.play_button = self.jump = self.now = None
         if len(result.t):
             self._draw_routes(result)
+        if len(result.t) and self.workbench is None:  # in an HTML export; the live workbench's object is moved instead
             node = f"{self.name}/object"
             self.object = self.server.scene.add_frame(node, show_axes=False)
             mesh = self.scene.object_mesh
             self.server.scene.add_mesh_simple(f"{node}/mesh", mesh.vertices, mesh.faces, color=OBJECT_COLOR,
                                               cast_shadow=False, receive_shadow=False)
-            self._static_object(False)  # the layer's object replaces the scene's one at the initial placement
         self._build_gui(result)
         if len(result.t):
             self._draw_sample(0)  # the robot stays where it is until the timeline moves
@@ -112,16 +114,6 @@ class MotionLayer(StepLayer):
         points, colors = route_segments(result)
         if len(points):
             self.routes = self.server.scene.add_line_segments(f"{self.name}/routes", points, colors, thickness=ROUTE_THICKNESS)
-
-    def _static_object(self, visible: bool) -> None:
-        """Show or hide the workbench's object at the initial placement (the scene layer's), if there is a workbench."""
-        layer = getattr(self.workbench, "scene_layer", None)
-        if layer is None:
-            return
-        try:
-            layer.object.visible = visible
-        except RuntimeError:  # that scene was replaced (its object removed): nothing to restore
-            pass
 
     def _seconds(self) -> list[float] | None:
         """The step's stage seconds from the session record (4 per phase), if the session is known."""
@@ -175,8 +167,8 @@ class MotionLayer(StepLayer):
             self.timeline.value = i
 
     def show(self, i: int) -> None:
-        """Draw sample i and put the workbench's robot there (only its meshes while playing, so its joint sliders stay;
-        fully, with sliders and collisions, otherwise)."""
+        """Draw sample i and put the workbench's robot and object there (only the meshes while playing; the sliders follow,
+        and collisions are checked, otherwise)."""
         r = self.result
         if r is None or not len(r.t):
             return
@@ -186,8 +178,10 @@ class MotionLayer(StepLayer):
             return
         if self.playing:
             wb.robot_layer.update(r.q[i])
+            wb.scene_layer.place_object(r.object_pose[i])
+            wb.session_panel.showing(TIMELINE)
         else:
-            wb.pose_robot(r.q[i])
+            wb.pose_robot(r.q[i], r.object_pose[i], TIMELINE)
 
     def _draw_sample(self, i: int) -> int:
         """Make sample i (clipped to the trajectory) the shown one: the object at its pose and the caption; returns i."""
@@ -300,5 +294,4 @@ class MotionLayer(StepLayer):
 
     def remove(self) -> None:
         self.stop()
-        self._static_object(True)
         super().remove()

@@ -24,12 +24,14 @@ from planner.task import Scene
 
 from ..notify import error_text
 from .arms import ARM_COLORS
-from .base import StepLayer
+from .base import Pose, StepLayer
 
 SHADES = (1.0, 0.55, 1.45, 0.8)  # brightness of the wrist's colour for the 1st, 2nd, ... largest component
 SMALL_COLOR = (150, 150, 150)  # components beyond SHADES
 INVALID_COLOR = (60, 60, 60)  # edges marked invalid
-LINE_THICKNESS = 0.002  # m
+LINE_THICKNESS = 0.0012  # m: thin and ...
+FAINT = 0.6  # ... faded this far toward the background, so the Super Graph never hides the robot and the object
+BACKGROUND = 245  # the viewer's near-white background, per channel
 ARM_COLOR_NAMES = ("blue", "orange", "green", "purple")  # of ARM_COLORS
 MARK_RADIUS = 0.025  # m: the chosen node's wrists
 MARK_COLOR = (250, 20, 160)
@@ -42,6 +44,11 @@ def _shade(color: tuple[int, int, int], factor: float) -> tuple[int, int, int]:
     h, light, s = colorsys.rgb_to_hls(*(c / 255 for c in color))
     r, g, b = colorsys.hls_to_rgb(h, min(1.0, light * factor), s)
     return int(r * 255), int(g * 255), int(b * 255)
+
+
+def faint(colors: np.ndarray) -> np.ndarray:
+    """uint8 colours faded toward the background by FAINT."""
+    return np.round(colors + FAINT * (BACKGROUND - colors.astype(float))).astype(np.uint8)
 
 
 def edge_colors(roadmap: Roadmap) -> np.ndarray:
@@ -93,7 +100,7 @@ class RoadmapLayer(StepLayer):
         stats = result.stats()
         if len(result.edges):
             points = result.wrists[result.edges].transpose(0, 2, 1, 3)  # (edges, wrists, 2 ends, 3)
-            colors = np.repeat(edge_colors(result)[:, :, None], 2, axis=2)
+            colors = np.repeat(faint(edge_colors(result))[:, :, None], 2, axis=2)
             self.server.scene.add_line_segments(f"{self.name}/edges", points.reshape(-1, 2, 3).astype(np.float32),
                                                 colors.reshape(-1, 2, 3), thickness=LINE_THICKNESS)
         self._build_gui(stats)
@@ -101,7 +108,7 @@ class RoadmapLayer(StepLayer):
         self.poses = {}
         if len(result.node_q):
             first = int(np.flatnonzero(result.node_component == largest)[0])
-            self.poses = {f"roadmap: node {first} (largest component)": result.node_q[first]}
+            self.poses = {f"roadmap: node {first} (largest component)": Pose(result.node_q[first], self.scene.object_initial)}
             self.mark(first)
 
     def _build_gui(self, stats: dict) -> None:
@@ -145,7 +152,7 @@ class RoadmapLayer(StepLayer):
         wb = self.workbench
         if wb is None:
             return
-        wb.pose_robot(self.roadmap.node_q[i])
+        wb.pose_robot(self.roadmap.node_q[i], self.scene.object_initial, f"roadmap: node {i}")
         self._say(f"Robot at node {i} (component {int(self.roadmap.node_component[i])}).")
 
     def plan_to(self, i: int) -> threading.Thread | None:
@@ -191,19 +198,19 @@ class RoadmapLayer(StepLayer):
             return
         self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, {len(result.nodes)} graph nodes, "
                   f"length {result.length:.2f} rad, {result.checks} checks, {time.monotonic() - t0:.1f} s. *Animating…*")
-        self._animate(wb, frames(self.scene.robot, result.path), animation)
+        self._animate(wb, frames(self.scene.robot, result.path), animation, f"roadmap: path to node {i}")
         if animation == self._animation:
             self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, {len(result.nodes)} graph nodes, "
                       f"length {result.length:.2f} rad, {result.checks} checks. Robot at node {i}.")
 
-    def _animate(self, wb: Any, qs: np.ndarray, animation: int) -> None:
+    def _animate(self, wb: Any, qs: np.ndarray, animation: int, label: str) -> None:
         """Pose the robot at each of qs, at most FPS a second (slower when drawing is); stops when another action starts."""
         start = time.monotonic()
         for k, q in enumerate(qs):
             if animation != self._animation:
                 return
             time.sleep(max(0.0, start + k / FPS - time.monotonic()))
-            wb.pose_robot(q)
+            wb.pose_robot(q, self.scene.object_initial, label)
 
     # -- removal ---------------------------------------------------------------------------------
 
