@@ -230,6 +230,31 @@ def build_collision_model(robot: Robot, environment: Environment = (), params: C
     return CollisionModel(robot, gm, pair_set, params, n_robot, parts, subsets)
 
 
+def geometry_data(cm: CollisionModel, subset: str) -> pin.GeometryData:
+    """Fresh collision data of `cm` with only the subset's pairs active, each padded as the model's parameters say
+    (set with one call each: a Python loop over thousands of pairs cost more than checking a short motion)."""
+    gm = cm.geometry
+    n = len(gm.geometryObjects)
+    ends = np.array([(cp.first, cp.second) for cp in gm.collisionPairs], dtype=np.int64).reshape(-1, 2)
+
+    def table(per_pair: np.ndarray) -> np.ndarray:
+        out = np.zeros((n, n), dtype=per_pair.dtype)
+        out[ends[:, 0], ends[:, 1]] = per_pair
+        out[ends[:, 1], ends[:, 0]] = per_pair
+        return out
+
+    active = np.zeros(len(ends), dtype=bool)
+    active[cm.subsets[subset]] = True
+    margin = np.zeros(len(ends))
+    margin[cm.subsets["env"]] = cm.params.env_padding
+    margin[cm.subsets["self"]] = cm.params.self_padding
+    margin[cm.subsets.get("object", [])] = cm.params.object_padding
+    gd = pin.GeometryData(gm)
+    gd.setActiveCollisionPairs(gm, table(active), True)
+    gd.setSecurityMargins(gm, table(margin), True, False)
+    return gd
+
+
 class CollisionChecker:
     """Per-thread scratch data for one CollisionModel: one broad-phase manager per subset."""
 
@@ -245,18 +270,7 @@ class CollisionChecker:
         if subset not in self._managers:
             if subset not in self.cm.subsets:
                 raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
-            gd = pin.GeometryData(self.cm.geometry)
-            active = np.zeros(len(self.cm.geometry.collisionPairs), dtype=bool)
-            active[self.cm.subsets[subset]] = True
-            for k in np.flatnonzero(~active):
-                gd.deactivateCollisionPair(int(k))
-            for k in self.cm.subsets["env"]:
-                gd.collisionRequests[int(k)].security_margin = self.cm.params.env_padding
-            if self.cm.params.self_padding:
-                for k in self.cm.subsets["self"]:
-                    gd.collisionRequests[int(k)].security_margin = self.cm.params.self_padding
-            for k in self.cm.subsets.get("object", ()):
-                gd.collisionRequests[int(k)].security_margin = self.cm.params.object_padding
+            gd = geometry_data(self.cm, subset)
             self._gdata[subset] = gd
             self._managers[subset] = pin.BroadPhaseManager_SSaPCollisionManager(self.model, self.cm.geometry, gd)
         return self._gdata[subset], self._managers[subset]
