@@ -158,7 +158,7 @@ def test_params_lists_every_parameter_with_type_and_default():
 @pytest.mark.parametrize("assignment, message", [
     ("nostep.seeds=3", "no step 'nostep'"),
     ("arms.nope=3", "step 'arms' has no parameter nope"),
-    ("motion.rrt_time=fast", "parameter rrt_time expects float, got 'fast'"),
+    ("motion.rrt_motions=fast", "parameter rrt_motions expects int, got 'fast'"),
     ("exchange.keep=2.5", "parameter keep expects int"),
     ("roadmap.radius=NaN", "parameter radius expects a finite number"),
     ("arms", "--set expects step.param=value"),

@@ -96,7 +96,7 @@ class PhasePlanner:
         self.iks: dict[tuple[str, ...], ArmIK] = {}  # one solver (and its scratch data) per set of arms
         self.stats = [TransitStats() for _ in PHASES]
         self.transit_params = TransitParams(params.connections, params.max_connections, params.max_searches, params.max_reconnections,
-                                            params.reconnect_time, params.rrt_time, params.rrt_step, params.shortcut_attempts)
+                                            params.reconnect_motions, params.rrt_motions, params.rrt_step, params.shortcut_attempts)
         robot = self.robot
         self.transit_idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
         self.open = robot.q_rest
@@ -269,7 +269,7 @@ class PhasePlanner:
         stats = self.stats[phase]
         try:
             if arm is not None:
-                limit = dataclasses.replace(self.transit_params, rrt_time=self.transit_params.reconnect_time)
+                limit = dataclasses.replace(self.transit_params, rrt_motions=self.transit_params.reconnect_motions)
                 path = rrt_transit(space, full, near, q_start, q_goal, limit, self.rng, stats)
             elif self.baseline:
                 path = rrt_transit(space, full, near, q_start, q_goal, self.transit_params, self.rng, stats)

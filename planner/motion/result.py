@@ -26,8 +26,9 @@ class MotionParams:
     max_connections: int = 48  # ... among at most this many nearest nodes tried
     max_searches: int = 60  # transit: graph searches after invalidations before reconnecting
     max_reconnections: int = 2  # transit: RRTConnect calls per query (then the next candidate end is tried)
-    reconnect_time: float = 1.5  # s: limit of one RRTConnect reconnection
-    rrt_time: float = 30.0  # s: limit of one RRTConnect query of the baseline planner ('rrt')
+    reconnect_motions: int = 1000  # motion checks one RRTConnect reconnection may make (a budget in checks, unlike one in
+    # seconds, gives the same result on any machine)
+    rrt_motions: int = 20000  # motion checks one RRTConnect query of the baseline planner ('rrt') may make
     rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension, joint-space distance)
     shortcut_attempts: int = 16  # random shortcuts per transit
     max_double_grasps: int = 6  # double grasps tried, best first

@@ -51,9 +51,11 @@ class _CallableMotionValidator(ob.MotionValidator):
         self._dim = dim
         self._state_valid = state_valid
         self._motion_valid = motion_valid
+        self.motions = 0  # motions checked so far (a budget in these is the same on any machine)
 
     def checkMotion(self, s1: ob.State, s2: ob.State) -> bool:
         """Whether RRTConnect may join s1 to s2: s2 is a valid state and the segment is free."""
+        self.motions += 1
         b = _to_array(s2, self._dim)
         return bool(self._state_valid(b)) and bool(self._motion_valid(_to_array(s1, self._dim), b))
 
@@ -106,7 +108,7 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
                 state_valid: StateValid,
                 motion_valid: MotionValid,
                 start: np.ndarray, goal: np.ndarray, *, seed: int, time_limit: float = 30.0,
-                range_: float = 0.0, more_goals: np.ndarray | None = None) -> RRTResult:
+                range_: float = 0.0, more_goals: np.ndarray | None = None, max_motions: int | None = None) -> RRTResult:
     """Plan from `start` to `goal` (or to any of `more_goals`, (k, d) valid states: the goal tree grows from each) in the
     box [lower, upper] with OMPL's RRTConnect; the raw path, unsimplified.
 
@@ -115,7 +117,9 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
     new state towards the tree). `range_` is RRTConnect's extension length (0: OMPL's default,
     a fifth of the space's extent). The same inputs and seed give the same path when the solve
     ends before `time_limit`: OMPL's seed generator is reseeded before anything random is made
-    (process-wide, so concurrent OMPL use in other threads would break this).
+    (process-wide, so concurrent OMPL use in other threads would break this). With `max_motions` the
+    solve stops after that many motion checks instead of after `time_limit`: the same inputs and seed
+    then give the same result on any machine, however busy.
     """
     lower, upper, start, goal, seed = _checked_inputs(lower, upper, start, goal, seed, time_limit, range_)
     d = lower.size
@@ -140,7 +144,8 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
         space.setBounds(bounds)
         si = ob.SpaceInformation(space)
         si.setStateValidityChecker(lambda s: bool(state_valid(_to_array(s, d))))
-        si.setMotionValidator(_CallableMotionValidator(si, d, state_valid, motion_valid))
+        validator = _CallableMotionValidator(si, d, state_valid, motion_valid)
+        si.setMotionValidator(validator)
         si.setup()
 
         start_state = si.allocState()
@@ -159,7 +164,10 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
         planner.setup()
 
         t0 = time.perf_counter()
-        status = planner.solve(float(time_limit))
+        if max_motions is None:
+            status = planner.solve(float(time_limit))
+        else:
+            status = planner.solve(ob.PlannerTerminationCondition(lambda: validator.motions >= max_motions))
         seconds = time.perf_counter() - t0
 
         data = ob.PlannerData(si)
@@ -171,7 +179,7 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
             waypoints = np.array([path.getState(i)[0:d] for i in range(path.getStateCount())], dtype=float)
             return RRTResult(True, _frozen(waypoints), states, seconds, "")
     if kind in (ob.PlannerStatus.TIMEOUT, ob.PlannerStatus.APPROXIMATE_SOLUTION):
-        message = f"no path within {time_limit:g} s"
+        message = f"no path within {time_limit:g} s" if max_motions is None else f"no path within {max_motions} motion checks"
     else:
         message = f"RRTConnect stopped: {status.asString()}"
     return RRTResult(False, _frozen(np.empty((0, d))), states, seconds, message)

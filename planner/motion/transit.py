@@ -31,8 +31,8 @@ class TransitParams:
     max_connections: int = 48  # ... among at most this many nearest nodes tried
     max_searches: int = 60  # searches after invalidations before giving up
     max_reconnections: int = 2  # RRTConnect calls per transit
-    reconnect_time: float = 1.5  # s per RRTConnect reconnection
-    rrt_time: float = 30.0  # s per RRTConnect query of the baseline
+    reconnect_motions: int = 1000  # motion checks per RRTConnect reconnection (a budget, unlike seconds, is the same on any machine)
+    rrt_motions: int = 20000  # motion checks per RRTConnect query of the baseline
     rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension)
     shortcut_attempts: int = 16
     goal_nodes: int = 16  # reconnecting an end cut off from the graph: valid graph nodes nearest it the tree may reach
@@ -58,7 +58,7 @@ class TransitFailed(Exception):
     """No transit path: `part` names what failed (for the step's failure message)."""
 
 
-def _rrt(space: JointSpace, full: MotionValidity, qa: np.ndarray, qb: np.ndarray, seed: int, time_limit: float,
+def _rrt(space: JointSpace, full: MotionValidity, qa: np.ndarray, qb: np.ndarray, seed: int, max_motions: int,
          step: float) -> np.ndarray | None:
     """RRTConnect from a full configuration of the space to another (or to any row of qb) with the given validity,
     extending by at most `step` (joint-space distance; short steps keep each motion check cheap); the path as full
@@ -66,7 +66,7 @@ def _rrt(space: JointSpace, full: MotionValidity, qa: np.ndarray, qb: np.ndarray
     goals = space.reduce(np.atleast_2d(qb))
     result = rrt_connect(space.lower, space.upper, lambda x: full.state_valid(space.full(x)),
                          lambda a, b: full.motion_valid(space.full(a), space.full(b), ends=False),
-                         space.reduce(qa), goals[0], seed=seed, time_limit=time_limit, range_=step, more_goals=goals[1:])
+                         space.reduce(qa), goals[0], seed=seed, range_=step, more_goals=goals[1:], max_motions=max_motions)
     return space.full(result.path) if result.found else None
 
 
@@ -201,7 +201,7 @@ class LazyTransit:
             check = self.near if {a, *targets} & set(self.ends) else self.full
             t_rrt = time.perf_counter()
             found = _rrt(self.space, check, self._config(a), np.array([self._config(n) for n in targets]),
-                         int(self.rng.integers(2**31)), self.p.reconnect_time, self.p.rrt_step)
+                         int(self.rng.integers(2**31)), self.p.reconnect_motions, self.p.rrt_step)
             stats.seconds_reconnecting += time.perf_counter() - t_rrt
             t += time.perf_counter() - t_rrt  # the RRT's time is not validation's
             if found is not None:
@@ -227,10 +227,10 @@ def rrt_transit(space: JointSpace, full: MotionValidity, near: MotionValidity, q
     query cannot tell their neighbourhood from the rest)."""
     t = time.perf_counter()
     stats.rrt_calls += 1
-    found = _rrt(space, near, q_start, q_goal, int(rng.integers(2**31)), params.rrt_time, params.rrt_step)
+    found = _rrt(space, near, q_start, q_goal, int(rng.integers(2**31)), params.rrt_motions, params.rrt_step)
     stats.seconds_planning += time.perf_counter() - t
     if found is None:
-        raise TransitFailed(f"RRTConnect found no path within {params.rrt_time:g} s")
+        raise TransitFailed(f"RRTConnect found no path within {params.rrt_motions} motion checks")
     stats.nodes_planning += len(found) - 2
     return found
 
