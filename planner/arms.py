@@ -21,7 +21,7 @@ from .exchange import wrist
 from .exchange_grid import WristWaypoints, exchange_costs
 from .reach import ReachResult, placement_reach
 from .results import array
-from .steps import Step, StepContext
+from .steps import Step, StepContext, StepOutput
 from .task import Scene
 
 FORCE_HINT = "force the arms with --set arms.picking_arm=ARM --set arms.placing_arm=ARM"
@@ -131,7 +131,7 @@ def decide(scene: Scene, reaches: dict[str, dict[str, ReachResult]], forced: tup
     return Decision(a, b, True, choice, costs, "")
 
 
-def assign_arms(ctx: StepContext) -> ArmAssignment:
+def assign_arms(ctx: StepContext) -> StepOutput:
     scene, p = ctx.scene, ctx.params
     if p.picking_arm or p.placing_arm:
         forced_decision(scene, (p.picking_arm, p.placing_arm))  # bad names are refused before the reach search
@@ -142,7 +142,7 @@ def assign_arms(ctx: StepContext) -> ArmAssignment:
     distances = {name: {a: r.distance for a, r in per_arm.items()} for name, per_arm in reaches.items()}
     q_pick = reaches["initial"][d.picking_arm].q if d.picking_arm else scene.q_initial
     q_place = reaches["final"][d.placing_arm].q if d.placing_arm else scene.q_final
-    return ArmAssignment(d.picking_arm, d.placing_arm, distances, d.handover, d.choice, d.costs, d.failure, q_pick, q_place)
+    return StepOutput(ArmAssignment(d.picking_arm, d.placing_arm, distances, d.handover, d.choice, d.costs, d.failure, q_pick, q_place))
 
 
 STEP = Step("arms", "which arm picks and which places", (), ArmsParams, ArmAssignment, assign_arms)

@@ -21,7 +21,7 @@ from .reach import grasp_centre
 from .results import array
 from .robot import Robot, joint_at
 from .stages import StageLog
-from .steps import Step, StepContext
+from .steps import Step, StepContext, StepOutput
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,7 @@ def wrist(robot: Robot, arm: str, q: np.ndarray) -> np.ndarray:
     return robot.frame_placement(q, robot.palm_frame(arm))[:3, 3]
 
 
-def run(ctx: StepContext) -> Exchange:
+def run(ctx: StepContext) -> StepOutput:
     scene, p = ctx.scene, ctx.params
     robot = scene.robot
     configs = ctx.inputs["grasp_configs"]
@@ -121,8 +121,8 @@ def run(ctx: StepContext) -> Exchange:
         if not len(best):
             failure = log.failure("no exchange position: no grid node both hands reach is collision-free")
     ctx.progress(1.0, f"{int(free.sum())} free nodes")
-    ctx.timings.extend(log.seconds)
-    return Exchange(log.stages, failure, p.step, shoulders.tolist(), radii.tolist(), len(box), nodes, costs, free, best, w)
+    return StepOutput(Exchange(log.stages, failure, p.step, shoulders.tolist(), radii.tolist(), len(box), nodes, costs, free, best, w),
+                      tuple(log.seconds))
 
 
 NAME = "exchange"

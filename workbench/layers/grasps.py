@@ -126,7 +126,7 @@ class GraspsLayer(StepLayer):
     @staticmethod
     def summary(result: GraspList) -> str:
         return (f"{len(result)} grasps kept of {result.frames_tried} frames tried, μ={result.mu:g}, "
-                f"{result.cone_edges} cone edges, {result.seconds:.1f} s")
+                f"{result.cone_edges} cone edges")
 
     def scores_text(self, rank: int) -> str:
         r = self.result
