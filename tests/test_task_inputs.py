@@ -17,7 +17,7 @@ import pytest
 from planner.errors import InputError
 from planner.paths import ASSETS, robot_data_file
 from planner.robot import build_robot, load_robot
-from planner.robot_spec import load_robot_spec
+from planner.robot_spec import RESERVED_NAMES, load_robot_spec
 from planner.task import load_task, scene_from_dict
 
 ALEX = ASSETS / "robots" / "alex_allegro.toml"
@@ -305,6 +305,8 @@ SPEC_CASES = {
     "one arm": ([("del", "arms.left")], "arms", ["expected exactly two arms", "got 1"]),
     "three arms": ([("copy", "arms.right", "arms.third")], "arms", ["expected exactly two arms", "got 3"]),
     "arm not a table": ([("set", "arms.left", "LeftShoulderPitch")], "arms.left", ["expected a table, got str"]),
+    **{f"arm named {name}": ([("rename", RIGHT, name)], f"arms.{name}", [f"'{name}' cannot name an arm", "rename the arm"])
+       for name in (*RESERVED_NAMES, "right_hand", "right_env")},
 }
 
 
