@@ -72,6 +72,10 @@ class Robot:
         hand = self.spec.arm(arm).hand
         return hand.prefixed(hand.palm_frame)
 
+    def wrist_frame(self, arm: str) -> str:
+        """The name of an arm's wrist frame: the body frame its hand is mounted on (the one meaning of 'wrist')."""
+        return self.spec.arm(arm).hand.mount_frame
+
     def clip(self, q: np.ndarray) -> np.ndarray:
         return np.clip(q, self.lower, self.upper)
 

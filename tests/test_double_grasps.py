@@ -14,7 +14,7 @@ import trimesh
 
 from planner.collision import build_collision_model
 from planner.environment import Obstacle
-from planner.exchange_grid import WristWaypoints, exchange_costs
+from planner.exchange_grid import PalmWaypoints, exchange_costs
 from planner.paths import ASSETS
 from planner.runner import run_pipeline
 from planner.session import Session
@@ -112,7 +112,7 @@ def test_double_grasps_are_valid_and_ranked(planned):
 def test_exchange_node_is_the_cheapest_free_node(planned):
     scene = planned.scene
     x = planned.result("exchange")
-    w = WristWaypoints(*x.waypoints)
+    w = PalmWaypoints(*x.waypoints)
     d = lambda p, r: float(np.linalg.norm(p - r))
     brute = np.array([d(w.pick_initial, w.pick_grasp) + d(w.pick_grasp, e) + d(e, w.pick_final)
                       + d(w.place_initial, e) + d(e, w.place_place) + d(w.place_place, w.place_final) for e in x.nodes])

@@ -163,9 +163,9 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
 
 
 def wrist_positions(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """(n, arms, 3) world positions of each hand's mount frame (the wrist) at each configuration."""
+    """(n, arms, 3) world positions of each arm's wrist frame (its hand's mount frame) at each configuration."""
     data = robot.model.createData()
-    fids = [robot.frame_id(arm.hand.mount_frame) for arm in robot.spec.arms]
+    fids = [robot.frame_id(robot.wrist_frame(arm)) for arm in robot.spec.arm_names]
     out = np.empty((len(q), len(fids), 3))
     for i, qi in enumerate(q):
         pin.framesForwardKinematics(robot.model, data, qi)
