@@ -183,11 +183,6 @@ class CollisionModel:
     parts: tuple[str, ...]
     subsets: dict[str, np.ndarray]
 
-    def pair_names(self, subset: str = "all") -> list[tuple[str, str]]:
-        objs = self.geometry.geometryObjects
-        return [(objs[self.geometry.collisionPairs[int(k)].first].name, objs[self.geometry.collisionPairs[int(k)].second].name)
-                for k in self.subsets[subset]]
-
     def checker(self) -> "CollisionChecker":
         return CollisionChecker(self)
 
