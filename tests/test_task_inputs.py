@@ -108,10 +108,8 @@ def check(err: InputError, source: Path, field: str | None, *phrases: str) -> No
     """The error names the file and the field, and its message says what was expected."""
     msg = str(err)
     assert err.source == str(source), msg
-    assert msg.startswith(str(source)), msg
     assert err.field == field, msg
-    if field:
-        assert f"field '{field}'" in msg
+    assert msg.startswith(str(source) + (f", field '{field}': " if field else ": ")), msg
     for phrase in phrases:
         assert phrase in msg, f"{phrase!r} not in {msg!r}"
 
