@@ -2,26 +2,41 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import viser
 
 from planner.errors import RegraspError
+from planner.pipeline import step_named
 from planner.session import Session
 from planner.task import Scene
 
+from ..robot_layer import RobotLayer
 from ..rooted import Rooted
+from ..scene_layer import SceneLayer
+
+
+class Host(Protocol):
+    """What a layer may use of the live workbench: its robot (posed fully, or only its meshes) and the scene's object."""
+
+    q: np.ndarray
+    robot_layer: RobotLayer | None
+    scene_layer: SceneLayer | None
+
+    def pose_robot(self, q: np.ndarray) -> None:
+        """Put the robot at q (meshes, joint sliders and collisions)."""
 
 
 class StepLayer(Rooted, ABC):
     """Draws one step's result; `update(result)` (re)draws it and fills `poses`: robot configurations worth showing, by label."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Host | None = None,
+                 session: Session | None = None):
         super().__init__(server, root)
         self.server = server
         self.scene = scene
-        self.workbench = workbench  # the live Workbench whose robot a layer may pose; None in an HTML export
+        self.workbench = workbench  # the live workbench whose robot a layer may pose; None in an HTML export
         self.session = session  # the drawn Session: a layer reads the earlier steps' results it needs from it
         self.name = root
         self.poses: dict[str, np.ndarray] = {}
@@ -32,6 +47,12 @@ class StepLayer(Rooted, ABC):
         if self.session is None:
             raise RegraspError(f"{type(self).__name__} needs the session to read step '{name}'")
         return self.session.result(name)
+
+    def params_of(self, name: str) -> Any:
+        """The frozen parameters the drawn session ran step `name` with (what its result was computed with)."""
+        if self.session is None:
+            raise RegraspError(f"{type(self).__name__} needs the session to read the parameters of step '{name}'")
+        return step_named(name).make_params(self.session.record_of(name)["params"])
 
     @abstractmethod
     def update(self, result: Any) -> None:

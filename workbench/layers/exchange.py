@@ -4,8 +4,6 @@ sphere at the chosen exchange position, and each palm's route through it: pickin
 final, placing palm initial -> exchange -> place -> final."""
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import viser
 
@@ -14,7 +12,7 @@ from planner.session import Session
 from planner.task import Scene
 
 from .arms import ARM_COLORS
-from .base import StepLayer
+from .base import Host, StepLayer
 from .stages import stages_markdown
 
 COLORMAP = np.array([(253, 231, 37), (94, 201, 98), (33, 145, 140), (59, 82, 139), (68, 1, 84)], float)  # viridis, reversed
@@ -48,7 +46,8 @@ def palm_routes(waypoints: np.ndarray, exchange: np.ndarray) -> tuple[np.ndarray
 class ExchangeLayer(StepLayer):
     """The exchange grid by cost, the best exchange position and the palms' routes through it."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Host | None = None,
+                 session: Session | None = None):
         super().__init__(server, scene, root, workbench, session)
         self.result: Exchange | None = None
         self.shown: viser.GuiSliderHandle | None = None
