@@ -30,7 +30,7 @@ from .robot_spec import HandSpec, RobotSpec
 from .steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
 from .user_cache import cache_key, cache_path, read_cached
 
-CODE_VERSION = "grasps-1"
+CODE_VERSION = "grasps-2"  # 2: no seconds in the list
 CHUNKS_PER_WORKER = 6
 
 

@@ -14,7 +14,7 @@ from ..user_cache import cache_path, read_cached
 from .build import build_roadmap
 from .result import Roadmap, RoadmapParams
 
-CODE_VERSION = "roadmap-1"
+CODE_VERSION = "roadmap-2"  # 2: no timings in the roadmap
 
 
 def cache_key(scene: Scene, params: RoadmapParams, seed: int) -> str:
