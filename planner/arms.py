@@ -2,9 +2,9 @@
 
 Each arm (with the torso) is tried on each placement (reach.py). When several picking/placing
 pairs are possible (both arms reach a placement), the pair with the lower estimated exchange cost
-is chosen: the wrists' travel of the paper's exchange cost (exchange_grid.py) with the witness
+is chosen: the palms' travel of the paper's exchange cost (exchange_grid.py) with the witness
 configurations as grasp and place, at the exchange point minimising it (the geometric median of the
-four wrist positions the exchange connects). When one arm reaches both placements no handover is
+four palm positions the exchange connects). When one arm reaches both placements no handover is
 needed: the step says so (the direct transfer, phases Grasp, Transfer, Rest, belongs to the motion
 step), unless the task asks for a handover (`handover = true`). Arms can be forced with the step's
 parameters; every failure message says how.
@@ -17,11 +17,11 @@ import numpy as np
 
 from .collision import build_collision_model
 from .errors import RegraspError
-from .exchange import wrist
-from .exchange_grid import WristWaypoints, exchange_costs
+from .exchange import palm_waypoints
+from .exchange_grid import exchange_costs
 from .reach import ReachResult, placement_reach
 from .results import array
-from .steps import Step, StepContext
+from .steps import Step, StepContext, StepOutput
 from .task import Scene
 
 FORCE_HINT = "force the arms with --set arms.picking_arm=ARM --set arms.placing_arm=ARM"
@@ -30,7 +30,7 @@ FORCE_HINT = "force the arms with --set arms.picking_arm=ARM --set arms.placing_
 @dataclass(frozen=True)
 class ArmsParams:
     seeds: int = 32  # IK starts per arm and placement
-    tolerance: float = 0.02  # m: grasp centre to the object's centre of mass
+    tolerance: float = 0.02  # m: fingertip centre to the object's centre of mass
     picking_arm: str = ""  # force the picking arm (with placing_arm); empty: chosen from reachability and exchange cost
     placing_arm: str = ""
 
@@ -76,10 +76,8 @@ def geometric_median(points: np.ndarray, iterations: int = 200) -> np.ndarray:
 
 
 def exchange_cost_estimate(scene: Scene, picking: str, placing: str, q_pick: np.ndarray, q_place: np.ndarray) -> float:
-    """The paper's exchange cost (m of wrist travel) for a pair of arms, witness configurations as grasp and place."""
-    robot = scene.robot
-    w = WristWaypoints(wrist(robot, picking, scene.q_initial), wrist(robot, picking, q_pick), wrist(robot, picking, scene.q_final),
-                       wrist(robot, placing, scene.q_initial), wrist(robot, placing, q_place), wrist(robot, placing, scene.q_final))
+    """The paper's exchange cost (m of palm travel) for a pair of arms, witness configurations as grasp and place."""
+    w = palm_waypoints(scene, picking, placing, q_pick, q_place)
     e = geometric_median(np.array([w.pick_grasp, w.pick_final, w.place_initial, w.place_place]))
     return float(exchange_costs(e[None], w)[0])
 
@@ -116,7 +114,7 @@ def decide(scene: Scene, reaches: dict[str, dict[str, ReachResult]], forced: tup
     if not pairs:
         reached = "; ".join(f"the {name} placement is reached by {', '.join(_reached(reaches, name)) or 'no arm'}"
                             for name in ("initial", "final"))
-        failure = (f"no pair of arms can hand the object over: {reached} (each arm with the torso, grasp centre within "
+        failure = (f"no pair of arms can hand the object over: {reached} (each arm with the torso, fingertip centre within "
                    f"tolerance of the object's centre of mass, collision-free); move the placements, or {FORCE_HINT}")
         return Decision("", "", True, failure, costs, failure)
     a, b = min(pairs, key=lambda pair: (costs[f"{pair[0]}>{pair[1]}"], pair))
@@ -125,13 +123,13 @@ def decide(scene: Scene, reaches: dict[str, dict[str, ReachResult]], forced: tup
     else:
         others = ", ".join(f"{k.replace('>', ' picks, ')} places: {v:.2f} m" for k, v in costs.items() if k != f"{a}>{b}")
         choice = (f"several arms reach a placement: {a} picks and {b} places, the lower estimated exchange cost "
-                  f"({costs[f'{a}>{b}']:.2f} m of wrist travel; {others})")
+                  f"({costs[f'{a}>{b}']:.2f} m of palm travel; {others})")
     if scene.handover and both:
         choice += "; the task asks for a handover although one arm reaches both placements"
     return Decision(a, b, True, choice, costs, "")
 
 
-def assign_arms(ctx: StepContext) -> ArmAssignment:
+def assign_arms(ctx: StepContext) -> StepOutput:
     scene, p = ctx.scene, ctx.params
     if p.picking_arm or p.placing_arm:
         forced_decision(scene, (p.picking_arm, p.placing_arm))  # bad names are refused before the reach search
@@ -142,7 +140,7 @@ def assign_arms(ctx: StepContext) -> ArmAssignment:
     distances = {name: {a: r.distance for a, r in per_arm.items()} for name, per_arm in reaches.items()}
     q_pick = reaches["initial"][d.picking_arm].q if d.picking_arm else scene.q_initial
     q_place = reaches["final"][d.placing_arm].q if d.placing_arm else scene.q_final
-    return ArmAssignment(d.picking_arm, d.placing_arm, distances, d.handover, d.choice, d.costs, d.failure, q_pick, q_place)
+    return StepOutput(ArmAssignment(d.picking_arm, d.placing_arm, distances, d.handover, d.choice, d.costs, d.failure, q_pick, q_place))
 
 
 STEP = Step("arms", "which arm picks and which places", (), ArmsParams, ArmAssignment, assign_arms)

@@ -218,9 +218,9 @@ def bench_motion(scene: Scene, seeds: int, folder, progress=print) -> MotionBenc
         results = dict(offline)
         for name in ONLINE_STEPS:
             step = step_named(name)
-            ctx = StepContext(scene, {n: results[n] for n in step.needs}, step.make_params(),
-                              np.random.default_rng(step_seed(seed, name)))
-            results[name] = step.run(ctx)
+            ctx = StepContext(scene, {n: results[n] for n in step.needs}, {n: step_named(n).make_params() for n in step.needs},
+                              step.make_params(), np.random.default_rng(step_seed(seed, name)))
+            results[name] = step.run(ctx).result
         for planner in runs:
             start = time.perf_counter()
             motion, seconds = plan_motion(scene, results["pick_grasps"], results["place_grasps"], results["double_grasps"],

@@ -74,7 +74,7 @@ class TaskReport:
         lines += ["", "object placements"]
         for name, hits in self.placement_collisions.items():
             lines.append(f"  {name:<10}" + ("collision-free" if not hits else "IN COLLISION with " + ", ".join(hits)))
-        lines += ["", "reachability: can the arm (with the torso) bring its hand's grasp centre (the open fingertips' mean) to",
+        lines += ["", "reachability: can the arm (with the torso) bring its hand's fingertip centre (the open fingertips' mean) to",
                   "the object's centre of mass at the placement, collision-free? The distance is the closest that centre came;",
                   f"within {self.tolerance * 100:.1f} cm counts, unless every such configuration collides ('collides')."]
         for placement, per_arm in self.reach.items():

@@ -15,6 +15,7 @@ import dataclasses
 import functools
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import coal
@@ -182,11 +183,6 @@ class CollisionModel:
     parts: tuple[str, ...]
     subsets: dict[str, np.ndarray]
 
-    def pair_names(self, subset: str = "all") -> list[tuple[str, str]]:
-        objs = self.geometry.geometryObjects
-        return [(objs[self.geometry.collisionPairs[int(k)].first].name, objs[self.geometry.collisionPairs[int(k)].second].name)
-                for k in self.subsets[subset]]
-
     def checker(self) -> "CollisionChecker":
         return CollisionChecker(self)
 
@@ -275,11 +271,18 @@ class CollisionChecker:
             self._managers[subset] = pin.BroadPhaseManager_SSaPCollisionManager(self.model, self.cm.geometry, gd)
         return self._gdata[subset], self._managers[subset]
 
-    def in_collision(self, q: np.ndarray, subset: str = "all") -> bool:
-        """True if any pair of the subset collides at q."""
+    def in_collision(self, q: np.ndarray, subset: str = "all", placed: Mapping[int, np.ndarray] | None = None) -> bool:
+        """True if any pair of the subset collides at q; `placed` (geometry index -> world pose) moves fixed geometries
+        for this call, in this checker's own data: the shared model is never written."""
         self.checks += 1
-        _, manager = self._subset(subset)
-        return bool(pin.computeCollisions(self.model, self.data, manager, q, True))
+        gd, manager = self._subset(subset)
+        if not placed:
+            return bool(pin.computeCollisions(self.model, self.data, manager, q, True))
+        pin.updateGeometryPlacements(self.model, self.data, self.cm.geometry, gd, q)
+        for index, T in placed.items():
+            gd.oMg[index] = se3(T)
+        manager.update(False)
+        return bool(pin.computeCollisions(manager, True))
 
     def colliding_pairs(self, q: np.ndarray, subset: str = "all") -> list[tuple[str, str]]:
         """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""

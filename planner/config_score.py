@@ -2,8 +2,8 @@
 
 Grasping arm: the cosine between the grasp's approach direction (palm origin towards the grasp
 centre) and the direction from the robot's base to the object: grasps coming from the far side
-score badly. Free arm: its joint distance to the rest configuration, its wrist's height difference
-to rest and its wrist's distance to the plane through the torso and both shoulders, each divided by
+score badly. Free arm: its joint distance to the rest configuration, its wrist's (the hand's mount
+frame's) height difference to rest and its wrist's distance to the plane through the torso and both shoulders, each divided by
 a scale and mapped through exp(-sum) into (0, 1]. The score is arm_weight * (1 + cos) / 2 +
 free_weight * free score.
 """
@@ -43,11 +43,11 @@ class ConfigScorer:
         self.palm = {a: robot.frame_id(robot.palm_frame(a)) for a in robot.spec.arm_names}
         self.approach = {a: approach_direction(robot, a) for a in robot.spec.arm_names}
         self.shoulder = {a: joint_at(model, int(idx[0])) for a, idx in robot.arm_idx.items()}
-        self.wrist = {a: joint_at(model, int(idx[-1])) for a, idx in robot.arm_idx.items()}
+        self.wrist = {a: robot.frame_id(robot.wrist_frame(a)) for a in robot.spec.arm_names}
         self.torso = joint_at(model, int(robot.torso_idx[0])) if len(robot.torso_idx) else 0
         pin.forwardKinematics(model, self.data, robot.q_rest)
         self.base = self.data.oMi[self.torso].translation.copy()
-        self.rest_wrist_z = {a: float(self.data.oMi[j].translation[2]) for a, j in self.wrist.items()}
+        self.rest_wrist_z = {a: float(pin.updateFramePlacement(model, self.data, f).translation[2]) for a, f in self.wrist.items()}
 
     def score(self, q: np.ndarray, arm: str, object_position: np.ndarray) -> ConfigScore:
         """The score of q with `arm` grasping an object whose centre of mass is at `object_position`."""
@@ -65,7 +65,7 @@ class ConfigScorer:
         robot, data, w = self.robot, self.data, self.w
         idx = robot.arm_idx[arm]
         joints = float(np.linalg.norm(q[idx] - robot.q_rest[idx]))
-        wrist = data.oMi[self.wrist[arm]].translation
+        wrist = pin.updateFramePlacement(robot.model, data, self.wrist[arm]).translation
         height = abs(float(wrist[2]) - self.rest_wrist_z[arm])
         shoulders = [data.oMi[j].translation for j in self.shoulder.values()]
         torso = data.oMi[self.torso].translation

@@ -12,13 +12,14 @@ are returned, best first.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .config_score import ConfigScorer
-from .grasp_configs import ConfigSampler, GraspConfigParams
+from .grasp_configs import ConfigSampler
 from .grasps import GraspList
 from .hand_model import load_hand_model
 from .hand_placement import hands_collide, posed_shapes
@@ -26,7 +27,7 @@ from .object_collision import ObjectCollision
 from .reach import approach_direction
 from .results import array
 from .stages import StageLog
-from .steps import Step, StepContext
+from .steps import Step, StepContext, StepOutput
 
 
 @dataclass(frozen=True)
@@ -120,7 +121,7 @@ def exchange_configuration(sampler: ConfigSampler, collision: ObjectCollision, h
     return None
 
 
-def run(ctx: StepContext) -> DoubleGrasps:
+def run(ctx: StepContext) -> StepOutput:
     scene, p = ctx.scene, ctx.params
     robot = scene.robot
     pick, place = ctx.inputs["pick_grasps"], ctx.inputs["place_grasps"]
@@ -138,7 +139,8 @@ def run(ctx: StepContext) -> DoubleGrasps:
     score = quality + config
     order = np.lexsort((np.arange(len(pairs)), -score))
     collision = ObjectCollision(scene)
-    sampler = ConfigSampler(robot, collision, ConfigScorer(robot), GraspConfigParams(torso_sigma=p.torso_sigma))
+    config_params = dataclasses.replace(ctx.input_params["grasp_configs"], torso_sigma=p.torso_sigma)
+    sampler = ConfigSampler(robot, collision, ConfigScorer(robot, config_params.weights()), config_params)
     approach = {arm: approach_direction(robot, arm) for arm in (a, b)}
     shoulders = dict(zip(robot.spec.arm_names, np.asarray(exchange.shoulders)))
     found, tried = [], 0
@@ -167,12 +169,12 @@ def run(ctx: StepContext) -> DoubleGrasps:
     ks = np.array([f[0] for f in found], np.int64)
     nq = robot.nq
     ctx.progress(1.0, f"{len(found)} double grasps")
-    ctx.timings.extend(log.seconds)
-    return DoubleGrasps(
+    return StepOutput(DoubleGrasps(
         a, b, len(hp.rank) * len(hq.rank), len(pairs), tried, log.stages, failure,
         pick_rank=hp.rank[i[ks]], place_rank=hq.rank[j[ks]], q_grasp=hp.q[i[ks]].reshape(-1, nq),
         q_exch=np.array([f[1] for f in found]).reshape(-1, nq), q_place=hq.q[j[ks]].reshape(-1, nq),
-        object_exchange=np.array([f[2] for f in found]).reshape(-1, 4, 4), quality=quality[ks], config=config[ks], score=score[ks])
+        object_exchange=np.array([f[2] for f in found]).reshape(-1, 4, 4), quality=quality[ks], config=config[ks], score=score[ks]),
+        tuple(log.seconds))
 
 
 NAME = "double_grasps"

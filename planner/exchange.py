@@ -3,8 +3,8 @@
 A 3-D grid covers the region both hands reach (the intersection of each arm's reach sphere about
 its shoulder, the reach estimated by sampling the arm). A node is free when the object's bounding
 sphere about its centre of mass, centred there, clears the environment and the robot's torso at
-rest. Each node costs the wrists' travel ig + ge + ef + ie + ep + pf (exchange_grid.py), the grasp
-and place wrists taken from the best-scored grasp and place configurations; the cheapest free nodes
+rest. Each node costs the palms' travel ig + ge + ef + ie + ep + pf (exchange_grid.py), the grasp
+and place palms taken from the best-scored grasp and place configurations; the cheapest free nodes
 are kept, best first. The exchange orientation depends on the double grasp (double_grasps.py).
 """
 from __future__ import annotations
@@ -14,14 +14,15 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .exchange_grid import WristWaypoints, best_nodes, exchange_costs, grid_nodes
+from .exchange_grid import PalmWaypoints, best_nodes, exchange_costs, grid_nodes
 from .hand_placement import ObstacleTest
 from .object_collision import ObjectCollision
-from .reach import grasp_centre
+from .reach import fingertip_centre
 from .results import array
 from .robot import Robot, joint_at
 from .stages import StageLog
-from .steps import Step, StepContext
+from .steps import Step, StepContext, StepOutput
+from .task import Scene
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ class Exchange:
     cost: np.ndarray = array("float64", ("k",))
     free: np.ndarray = array("bool", ("k",))  # collision-free
     best: np.ndarray = array("int64", ("m",))  # indices into nodes, cheapest first
-    waypoints: np.ndarray = array("float64", (6, 3))  # WristWaypoints fields, in order
+    waypoints: np.ndarray = array("float64", (6, 3))  # PalmWaypoints fields, in order
 
     @property
     def position(self) -> np.ndarray:
@@ -65,7 +66,7 @@ def arm_reach(robot: Robot, arm: str, samples: int, rng: np.random.Generator) ->
     idx = robot.arm_idx[arm]
     shoulder_joint = joint_at(model, int(idx[0]))
     palm = robot.frame_id(robot.palm_frame(arm))
-    offset = grasp_centre(robot, arm)
+    offset = fingertip_centre(robot, arm)
     pin.forwardKinematics(model, data, robot.q_rest)
     shoulder = data.oMi[shoulder_joint].translation.copy()
     q = robot.q_rest.copy()
@@ -78,11 +79,19 @@ def arm_reach(robot: Robot, arm: str, samples: int, rng: np.random.Generator) ->
     return shoulder, reach
 
 
-def wrist(robot: Robot, arm: str, q: np.ndarray) -> np.ndarray:
+def palm_position(robot: Robot, arm: str, q: np.ndarray) -> np.ndarray:
+    """The world position of an arm's palm frame at q (the point whose travel the exchange cost measures)."""
     return robot.frame_placement(q, robot.palm_frame(arm))[:3, 3]
 
 
-def run(ctx: StepContext) -> Exchange:
+def palm_waypoints(scene: Scene, picking: str, placing: str, q_grasp: np.ndarray, q_place: np.ndarray) -> PalmWaypoints:
+    """The picking palm at the initial, grasp and final configurations, the placing palm at the initial, place and final ones."""
+    stops = ((picking, scene.q_initial), (picking, q_grasp), (picking, scene.q_final),
+             (placing, scene.q_initial), (placing, q_place), (placing, scene.q_final))
+    return PalmWaypoints(*(palm_position(scene.robot, arm, q) for arm, q in stops))
+
+
+def run(ctx: StepContext) -> StepOutput:
     scene, p = ctx.scene, ctx.params
     robot = scene.robot
     configs = ctx.inputs["grasp_configs"]
@@ -111,8 +120,7 @@ def run(ctx: StepContext) -> Exchange:
     else:
         a, b = configs.picking_arm, configs.placing_arm
         q_grasp, q_place = pick.q[np.argmax(pick.score)], place.q[np.argmax(place.score)]
-        waypoints = WristWaypoints(wrist(robot, a, scene.q_initial), wrist(robot, a, q_grasp), wrist(robot, a, scene.q_final),
-                                   wrist(robot, b, scene.q_initial), wrist(robot, b, q_place), wrist(robot, b, scene.q_final))
+        waypoints = palm_waypoints(scene, a, b, q_grasp, q_place)
         w = np.array([waypoints.pick_initial, waypoints.pick_grasp, waypoints.pick_final,
                       waypoints.place_initial, waypoints.place_place, waypoints.place_final])
         costs = exchange_costs(nodes, waypoints)
@@ -121,9 +129,9 @@ def run(ctx: StepContext) -> Exchange:
         if not len(best):
             failure = log.failure("no exchange position: no grid node both hands reach is collision-free")
     ctx.progress(1.0, f"{int(free.sum())} free nodes")
-    ctx.timings.extend(log.seconds)
-    return Exchange(log.stages, failure, p.step, shoulders.tolist(), radii.tolist(), len(box), nodes, costs, free, best, w)
+    return StepOutput(Exchange(log.stages, failure, p.step, shoulders.tolist(), radii.tolist(), len(box), nodes, costs, free, best, w),
+                      tuple(log.seconds))
 
 
 NAME = "exchange"
-STEP = Step(NAME, "exchange position: 3-D grid of the wrists' travel (V-C, fig. 6)", ("grasp_configs",), ExchangeParams, Exchange, run)
+STEP = Step(NAME, "exchange position: 3-D grid of the palms' travel (V-C, fig. 6)", ("grasp_configs",), ExchangeParams, Exchange, run)

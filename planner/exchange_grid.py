@@ -1,7 +1,7 @@
-"""The exchange position (paper V-C, figure 6): a 3-D grid node minimising the wrists' travel.
+"""The exchange position (paper V-C, figure 6): a 3-D grid node minimising the palms' travel.
 
-Cost of a node e: ig + ge + ef for the picking wrist (initial -> grasp -> exchange -> final) plus
-ie + ep + pf for the placing wrist (initial -> exchange -> place -> final). The terms that do not
+Cost of a node e: ig + ge + ef for the picking palm (initial -> grasp -> exchange -> final) plus
+ie + ep + pf for the placing palm (initial -> exchange -> place -> final). The terms that do not
 involve e are constant, but are kept so the cost is the full distance the paper minimises.
 """
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 
 
 @dataclass(frozen=True)
-class WristWaypoints:
-    """Wrist positions (world, m) of the picking arm (initial, grasp, final) and placing arm (initial, place, final)."""
+class PalmWaypoints:
+    """Palm positions (world, m) of the picking arm (initial, grasp, final) and placing arm (initial, place, final)."""
 
     pick_initial: np.ndarray
     pick_grasp: np.ndarray
@@ -30,7 +30,7 @@ def grid_nodes(lower: np.ndarray, upper: np.ndarray, step: float) -> np.ndarray:
     return np.c_[xx.ravel(), yy.ravel(), zz.ravel()]
 
 
-def exchange_costs(nodes: np.ndarray, w: WristWaypoints) -> np.ndarray:
+def exchange_costs(nodes: np.ndarray, w: PalmWaypoints) -> np.ndarray:
     """ig + ge + ef + ie + ep + pf for every node (vectorised)."""
     d = lambda a, b: np.linalg.norm(np.asarray(a) - np.asarray(b), axis=-1)
     fixed = d(w.pick_initial, w.pick_grasp) + d(w.place_place, w.place_final)

@@ -27,7 +27,7 @@ from .object_collision import ObjectCollision
 from .results import array
 from .robot import Robot
 from .stages import StageLog
-from .steps import Step, StepContext
+from .steps import Step, StepContext, StepOutput
 from .task import Scene
 
 
@@ -182,7 +182,7 @@ class HandJob:
 
     role: str  # 'pick' or 'place'
     scene: Scene
-    collision: ObjectCollision  # built once before the fork; each process moves the object in its own copy
+    collision: ObjectCollision  # built once before the fork; each process places the object in its own copy of the checker data
     params: GraspConfigParams
     grasps: GraspList
     object_pose: np.ndarray
@@ -205,7 +205,7 @@ def hand_job(job: HandJob) -> tuple[np.ndarray, HandConfigs, StageLog]:
     return free, configs, log
 
 
-def run(ctx: StepContext) -> GraspConfigs:
+def run(ctx: StepContext) -> StepOutput:
     scene, p = ctx.scene, ctx.params
     arms = ctx.inputs["arms"]
     rngs = ctx.rng.spawn(2)
@@ -219,7 +219,6 @@ def run(ctx: StepContext) -> GraspConfigs:
     (pick_free, pick_cfg, pick_log), (place_free, place_cfg, place_log) = forked_map(hand_job, jobs, p.workers)
     log = StageLog()
     log.stages, log.seconds = pick_log.stages + place_log.stages, pick_log.seconds + place_log.seconds
-    ctx.timings.extend(log.seconds)
     failure = ""
     if not len(pick_cfg.rank):
         failure = log.failure(f"no collision-free pick grasp: the {arms.picking_arm} hand has no grasp with a robot configuration")
@@ -228,7 +227,8 @@ def run(ctx: StepContext) -> GraspConfigs:
     ctx.progress(1.0, f"{len(pick_cfg.rank)} pick, {len(place_cfg.rank)} place configurations")
     fields = {f"{role}_{f}": getattr(h, f) for role, h in (("pick", pick_cfg), ("place", place_cfg))
               for f in ("rank", "q", "arm_score", "free_score", "score")}
-    return GraspConfigs(arms.picking_arm, arms.placing_arm, log.stages, failure, pick_free, place_free, **fields)
+    return StepOutput(GraspConfigs(arms.picking_arm, arms.placing_arm, log.stages, failure, pick_free, place_free, **fields),
+                      tuple(log.seconds))
 
 
 NAME = "grasp_configs"

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import collections
 import os
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,12 +25,12 @@ from .grasp_frames import box_grid, hopf_rotations
 from .grasp_search import OUTCOMES, FrameGrasp, GraspSearch, SearchParams
 from .hand_model import HandModel, load_hand_model
 from .object_model import ObjectModel, mesh_bytes, object_model
-from .results import array, load_result, save_result, writing
+from .results import array, load_result, read_only, save_result, writing
 from .robot_spec import HandSpec, RobotSpec
-from .steps import Progress, Step, StepContext, no_progress, step_seed
+from .steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
 from .user_cache import cache_key, cache_path, read_cached
 
-CODE_VERSION = "grasps-1"
+CODE_VERSION = "grasps-2"  # 2: no seconds in the list
 CHUNKS_PER_WORKER = 6
 
 
@@ -80,7 +79,6 @@ class GraspList:
     cone_edges: int
     torque_scale: float  # m: the length torques are divided by (object radius about its centre of mass)
     object_com: list
-    seconds: float
     frames_tried: int
     outcomes: dict  # outcome name -> number of frames
     kept: int
@@ -118,7 +116,7 @@ class GraspList:
     def stats(self) -> dict:
         return {"hand": self.hand, "frames": self.frames_tried, "contacts_found": self.contacts_found,
                 "force_closed": self.outcomes.get("closed", 0), "kept": self.kept,
-                "best_quality": round(float(self.quality[0]), 4) if len(self) else None, "seconds": round(self.seconds, 2),
+                "best_quality": round(float(self.quality[0]), 4) if len(self) else None,
                 **({"failure": self.failure} if self.failure else {})}
 
     def contacts(self, rank: int) -> list[dict]:
@@ -126,15 +124,15 @@ class GraspList:
         return [{"finger": f, "point": self.contact_point[rank, i].tolist(), "normal": self.contact_normal[rank, i].tolist()}
                 for i, f in enumerate(self.fingers) if self.contact_mask[rank, i]]
 
-    def to_json(self) -> dict:
-        """The list as outside tools read it (names fixed by the issue: keep them)."""
+    def to_json(self, seconds: float) -> dict:
+        """The list as outside tools read it, with the `seconds` this run took to get it (names fixed by the issue: keep them)."""
         grasps = []
         for r in range(len(self)):
             g = {"hand_pose": self.hand_pose[r].tolist(), "finger_q": self.finger_q[r].tolist(), "contacts": self.contacts(r)}
             g.update({s: float(getattr(self, s)[r]) for s in self.SCORES})
             grasps.append(g)
         return {"hand": self.hand, "fingers": list(self.fingers), "mu": self.mu, "cone_edges": self.cone_edges,
-                "torque_scale": self.torque_scale, "object_com": list(self.object_com), "seconds": self.seconds,
+                "torque_scale": self.torque_scale, "object_com": list(self.object_com), "seconds": seconds,
                 "frames_tried": self.frames_tried, "outcomes": dict(self.outcomes), "grasps": grasps}
 
 
@@ -197,7 +195,6 @@ def _deduplicated(order: np.ndarray, points: np.ndarray, mask: np.ndarray, dista
 def compute_grasp_list(spec: HandSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams, seed: int,
                        progress: Progress = no_progress, workers: int | None = None) -> GraspList:
     """Compute one hand's ranked grasp list on a mesh (no cache)."""
-    start = time.perf_counter()
     workers = min(2, os.cpu_count() or 1) if workers is None else workers
     hand = load_hand_model(spec)
     progress(0.0, "object point set and finger workspaces")
@@ -225,7 +222,7 @@ def compute_grasp_list(spec: HandSpec, arm: str, mesh: trimesh.Trimesh, p: Grasp
     return GraspList(
         hand=arm, fingers=list(hand.finger_names), tip_radius=[fi.tip_radius for fi in hand.fingers], mu=p.mu,
         cone_edges=p.cone_edges, torque_scale=obj.radius, object_com=obj.com.tolist(),
-        seconds=time.perf_counter() - start, frames_tried=len(frames), outcomes={o: outcomes.get(o, 0) for o in OUTCOMES},
+        frames_tried=len(frames), outcomes={o: outcomes.get(o, 0) for o in OUTCOMES},
         kept=len(keep), hand_pose=poses[keep], finger_q=finger_q[keep], contact_point=points[keep],
         contact_normal=normals[keep], contact_mask=mask[keep], quality=quality[keep],
         **{s: v[keep] for s, v in scores.items()})
@@ -246,7 +243,7 @@ def grasp_list(spec: RobotSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams,
     with writing(folder):
         folder.mkdir(parents=True, exist_ok=True)
     save_result(result, folder, "grasps")
-    return result, False
+    return read_only(result), False
 
 
 SEED_NAME = "grasps"  # both grasp steps derive their seed from this name: a hand's list depends on the hand, not its role
@@ -263,9 +260,9 @@ def session_grasp_seed(session_seed: int) -> int:
 
 
 def _step_run(role: str) -> Any:
-    def run(ctx: StepContext) -> GraspList:
+    def run(ctx: StepContext) -> StepOutput:
         arm = getattr(ctx.inputs["arms"], f"{role}_arm")
-        return grasp_list(ctx.scene.robot.spec, arm, ctx.scene.object_mesh, ctx.params, seed_of(ctx.rng), ctx.progress)[0]
+        return StepOutput(grasp_list(ctx.scene.robot.spec, arm, ctx.scene.object_mesh, ctx.params, seed_of(ctx.rng), ctx.progress)[0])
 
     run.__doc__ = f"The {role} hand's grasp list (paper IV-A)."
     return run

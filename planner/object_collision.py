@@ -14,7 +14,7 @@ import pinocchio as pin
 
 from .collision import CollisionChecker, CollisionParams, build_collision_model
 from .environment import Obstacle
-from .geometry import coal_mesh, se3
+from .geometry import coal_mesh
 from .hand_placement import ObstacleTest
 from .task import Scene
 
@@ -24,7 +24,8 @@ OBJECT = "object"
 class ObjectCollision:
     """Checks a robot configuration with the object at a world pose, held by none, one or both hands.
 
-    Owns its model (the object's placement is written into it), so use one per thread.
+    The collision model is shared read-only; the object's pose goes to the checker's own data at each call,
+    so use one `ObjectCollision` (one checker) per thread.
     """
 
     def __init__(self, scene: Scene, params: CollisionParams = CollisionParams()):
@@ -53,17 +54,9 @@ class ObjectCollision:
     def subset(holding: tuple[str, ...]) -> str:
         return "object_held_by_" + ("_".join(holding) or "none")
 
-    def place_object(self, T: np.ndarray) -> None:
-        self.model.geometry.geometryObjects[self.index].placement = se3(T)
-
     def in_collision(self, q: np.ndarray, object_pose: np.ndarray, holding: tuple[str, ...] = ()) -> bool:
         """Self-collision, robot vs environment, and robot vs the object at `object_pose` (hands in `holding` excepted)."""
-        self.place_object(object_pose)
-        return self.checker.in_collision(q, self.subset(holding))
-
-    def colliding_pairs(self, q: np.ndarray, object_pose: np.ndarray, holding: tuple[str, ...] = ()) -> list[tuple[str, str]]:
-        self.place_object(object_pose)
-        return self.checker.colliding_pairs(q, self.subset(holding))
+        return self.checker.in_collision(q, self.subset(holding), {self.index: object_pose})
 
     def object_hits_environment(self, T: np.ndarray) -> bool:
         """The object at world pose T within the security margin of a static obstacle or of the robot's fixed base."""

@@ -53,28 +53,6 @@ class MeshOptions:
         return T
 
 
-@dataclass(frozen=True)
-class ObjectInfo:
-    """A summary of an object mesh, for reports and the workbench."""
-
-    n_vertices: int
-    n_faces: int
-    extents: tuple[float, float, float]
-    volume: float
-    center_mass: tuple[float, float, float]
-
-
-def object_info(mesh: trimesh.Trimesh) -> ObjectInfo:
-    """Counts, bounding-box extents (m), volume (m^3) and centre of mass of a mesh."""
-    return ObjectInfo(
-        n_vertices=len(mesh.vertices),
-        n_faces=len(mesh.faces),
-        extents=tuple(float(e) for e in mesh.extents),
-        volume=float(mesh.volume),
-        center_mass=tuple(float(c) for c in mesh.center_mass),
-    )
-
-
 def _read(path: Path, file_type: str) -> trimesh.Trimesh:
     """Parse the file into one triangle mesh (scenes concatenated); any parser failure becomes an InputError."""
     try:

@@ -1,10 +1,10 @@
-"""Reachability: can an arm (with the torso) bring its hand's grasp centre to a point, collision-free?
+"""Reachability: can an arm (with the torso) bring its hand's fingertip centre to a point, collision-free?
 
-The grasp centre is the mean of the fingertips at the hand's open configuration, in the palm
+The fingertip centre is the mean of the fingertips at the hand's open configuration, in the palm
 frame: where an object sits when the hand closes on it. Position-only damped least squares from
 several seeds; a solution counts only if it respects joint limits and the arm and the palm collide
 with nothing (the manipulated object itself is not in the collision model). The fingers are left
-out: open, they reach past the grasp centre into the support of a low object, and they close on
+out: open, they reach past the fingertip centre into the support of a low object, and they close on
 the object anyway; each grasp's fingers are checked with its configuration (grasp_configs.py).
 """
 from __future__ import annotations
@@ -24,11 +24,11 @@ REACH_SEED = 0  # reachability is a property of the task: `check` and the arms s
 
 @dataclass(frozen=True)
 class ReachResult:
-    """Whether an arm brings its grasp centre to a target, how close it came, and the configuration that did."""
+    """Whether an arm brings its fingertip centre to a target, how close it came, and the configuration that did."""
 
     arm: str
     reachable: bool
-    distance: float  # m: the grasp centre to the target, at q
+    distance: float  # m: the fingertip centre to the target, at q
     q: np.ndarray  # when reachable a collision-free configuration achieving it, else the closest one found
     closest_collides: bool = False  # not reachable although a start came within tolerance: every such one collides
 
@@ -42,8 +42,10 @@ class ReachResult:
         return f"no: {cm} short" if self.distance > tolerance else f"no ({cm})"
 
 
-def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
-    """The grasp centre of an arm's hand in its palm frame."""
+def fingertip_centre(robot: Robot, arm: str) -> np.ndarray:
+    """The mean of the open hand's fingertips (rest configuration) in its palm frame: what reach aims at the object.
+
+    Not the grasp list's `grasps.grasp_centre`, the point of the fingers' workspaces that grasp frames are centred on."""
     hand = robot.spec.arm(arm).hand
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, robot.q_rest)
@@ -53,8 +55,8 @@ def grasp_centre(robot: Robot, arm: str) -> np.ndarray:
 
 
 def approach_direction(robot: Robot, arm: str) -> np.ndarray:
-    """The unit direction, in the palm frame, from the palm towards the grasp centre: where the hand approaches from."""
-    c = grasp_centre(robot, arm)
+    """The unit direction, in the palm frame, from the palm towards the fingertip centre: where the hand approaches from."""
+    c = fingertip_centre(robot, arm)
     return c / np.linalg.norm(c)
 
 
@@ -89,7 +91,7 @@ def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray,
           seeds: int = 32, tolerance: float = 0.02) -> ReachResult:
     """Try `seeds` starts (rest first, then random torso+arm); reachable if one ends within tolerance, collision-free."""
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
-    offset = grasp_centre(robot, arm)
+    offset = fingertip_centre(robot, arm)
     data = robot.model.createData()
     fingers = finger_geometries(robot, checker, arm)
     best, closest, collided = np.inf, robot.q_rest, False

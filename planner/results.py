@@ -76,6 +76,14 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode())
 
 
+def read_only(result: R) -> R:
+    """`result` with its array fields made read-only (results are immutable once built, like loaded ones)."""
+    for f in dataclasses.fields(result):
+        if _is_array(f):
+            getattr(result, f.name).setflags(write=False)
+    return result
+
+
 def save_result(result: Any, folder: Path, stem: str) -> list[str]:
     """Write a result as `<stem>.npz` (arrays) and `<stem>.json` (the rest); returns the file names."""
     arrays, rest = {}, {}

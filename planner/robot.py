@@ -72,6 +72,10 @@ class Robot:
         hand = self.spec.arm(arm).hand
         return hand.prefixed(hand.palm_frame)
 
+    def wrist_frame(self, arm: str) -> str:
+        """The name of an arm's wrist frame: the body frame its hand is mounted on (the one meaning of 'wrist')."""
+        return self.spec.arm(arm).hand.mount_frame
+
     def clip(self, q: np.ndarray) -> np.ndarray:
         return np.clip(q, self.lower, self.upper)
 
@@ -80,11 +84,7 @@ class Robot:
 
     def configuration(self, values: dict[str, float], base: np.ndarray | None = None) -> np.ndarray:
         """A configuration from joint name -> value, the rest taken from `base` (default: rest)."""
-        q = (self.q_rest if base is None else base).copy()
-        names = self.joint_names()
-        for name, value in values.items():
-            q[names.index(name)] = value
-        return q
+        return _configuration(self.model, values, self.q_rest if base is None else base)
 
     def frame_placement(self, q: np.ndarray, frame: str, data: pin.Data | None = None) -> np.ndarray:
         """4x4 world pose of a frame at q."""
@@ -92,6 +92,21 @@ class Robot:
         fid = self.frame_id(frame)
         pin.framesForwardKinematics(self.model, data, q)
         return data.oMf[fid].homogeneous.copy()
+
+
+def _configuration(model: pin.Model, values: dict[str, float], base: np.ndarray) -> np.ndarray:
+    """A copy of `base` with the named joints set (joint name -> value)."""
+    q = np.array(base, dtype=float)
+    names = [model.names[j] for j in range(1, model.njoints)]
+    for name, value in values.items():
+        q[names.index(name)] = value
+    return q
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """`a`, made read-only: the robot is shared, nobody may write into its arrays."""
+    a.setflags(write=False)
+    return a
 
 
 def _prefixed_urdf(path: Path, prefix: str) -> str:
@@ -238,15 +253,15 @@ def build_robot(spec: RobotSpec) -> Robot:
         raise InputError(spec.source, "body.locked_joints", f"joints belong to no part; lock them or name them: {', '.join(names)}")
     lower = model.lowerPositionLimit.copy()
     upper = model.upperPositionLimit.copy()
-    robot = Robot(spec, model, coll, vis, lower, upper, np.zeros(model.nq), torso_idx, arm_idx, hand_idx, finger_idx)
-    q_rest = robot.configuration(rest_configuration_of(spec), base=np.clip(np.zeros(model.nq), lower, upper))
-    if not robot.within_limits(q_rest):
-        bad = [i for i, (v, lo, hi) in enumerate(zip(q_rest, lower, upper)) if not lo - 1e-9 <= v <= hi + 1e-9]
+    q_rest = _configuration(model, rest_configuration_of(spec), np.clip(np.zeros(model.nq), lower, upper))
+    bad = [i for i, (v, lo, hi) in enumerate(zip(q_rest, lower, upper)) if not lo - 1e-9 <= v <= hi + 1e-9]
+    if bad:
         fld = owner[bad[0]].replace(".joints", ".rest").replace(".hand.fingers", ".hand.fingers.open").replace("torso_joints", "torso_rest")
         names = ", ".join(f"{robot_joint_name(model, i)} = {q_rest[i]:.4g} not in [{lower[i]:.4g}, {upper[i]:.4g}]" for i in bad)
         raise InputError(spec.source, fld, f"rest configuration outside the joint limits: {names}")
-    object.__setattr__(robot, "q_rest", q_rest)
-    return robot
+    return Robot(spec, model, coll, vis, _read_only(lower), _read_only(upper), _read_only(q_rest), _read_only(torso_idx),
+                 {a: _read_only(i) for a, i in arm_idx.items()}, {a: _read_only(i) for a, i in hand_idx.items()},
+                 {a: {f: _read_only(i) for f, i in fi.items()} for a, fi in finger_idx.items()})
 
 
 @functools.lru_cache(maxsize=8)

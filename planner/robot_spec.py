@@ -11,6 +11,10 @@ from pathlib import Path
 from .paths import ASSETS, robot_data_file
 from .tomlread import Table, load_toml
 
+# names the planner gives its own parts and collision subsets: an arm may not take one (nor end in '_hand' or '_env',
+# nor hold a '/'), or its subsets would overwrite theirs
+RESERVED_NAMES = ("self", "env", "all", "hands", "torso", "object", "moving", "changed", "mixed", "robot")
+
 
 @dataclass(frozen=True)
 class FingerSpec:
@@ -134,6 +138,14 @@ def _hand(tab: Table, spec_dir: Path) -> HandSpec:
     )
 
 
+def _arm_name(name: str, arms: Table) -> str:
+    """`name` if an arm may be called so; else an error naming the file and the field."""
+    if name in RESERVED_NAMES or name.endswith(("_hand", "_env")) or "/" in name or not name:
+        raise arms.error(name, f"'{name}' cannot name an arm: the names {', '.join(RESERVED_NAMES)}, names ending in '_hand' "
+                               "or '_env' and names with '/' are the planner's own parts and collision subsets; rename the arm")
+    return name
+
+
 def _arm(name: str, tab: Table, spec_dir: Path) -> ArmSpec:
     tab.check_keys({"joints", "rest", "shoulder_frame", "hand"})
     joints = tuple(tab.str_list("joints"))
@@ -157,7 +169,7 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     body.check_keys({"urdf", "base_xyz", "base_rpy", "drop_geometry", "locked_joints", "torso_joints", "torso_rest"})
     torso = tuple(body.str_list("torso_joints", default=[]))
     arms_tab = root.table("arms")
-    arms = tuple(_arm(name, arms_tab.table(name), path.parent) for name in arms_tab.data)
+    arms = tuple(_arm(_arm_name(name, arms_tab), arms_tab.table(name), path.parent) for name in arms_tab.data)
     if len(arms) != 2:
         raise arms_tab.error(None, f"expected exactly two arms (a picking and a placing arm), got {len(arms)}")
     return RobotSpec(

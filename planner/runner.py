@@ -1,6 +1,13 @@
-"""Running the pipeline into a session: the next step, or every step up to a named one."""
+"""Running the pipeline into a session: the next step, or every step up to a named one.
+
+Test hook: with the environment variable `REGRASP_KILL_AFTER=<step>`, the process kills itself
+(SIGKILL, no clean-up) right after that step's files and manifest are saved: a deterministic crash
+point for the resume test.
+"""
 from __future__ import annotations
 
+import os
+import signal
 import sys
 import time
 from collections.abc import Callable, Mapping
@@ -9,11 +16,12 @@ from typing import Any
 import numpy as np
 
 from .check import require_valid
-from .pipeline import steps_until
+from .pipeline import step_named, steps_until
 from .session import Session
 from .steps import Progress, Step, StepContext, StepFailed, no_progress
 
 ProgressFactory = Callable[[Step], Progress]
+KILL_AFTER = "REGRASP_KILL_AFTER"  # test hook: the step after whose saving the process kills itself
 
 
 def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = None, progress: Progress = no_progress) -> Any:
@@ -21,10 +29,14 @@ def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = No
     p = step.make_params(params)
     seed = step.seed(session.seed)
     inputs = {name: session.result(name) for name in step.needs}
-    ctx = StepContext(session.scene, inputs, p, np.random.default_rng(seed), progress)
+    input_params = {name: step_named(name).make_params(session.record_of(name)["params"]) for name in step.needs}
+    ctx = StepContext(session.scene, inputs, input_params, p, np.random.default_rng(seed), progress)
     start = time.perf_counter()
-    result = step.run(ctx)
-    session.record(step, p, seed, time.perf_counter() - start, result, ctx.timings)
+    output = step.run(ctx)
+    result = output.result
+    session.record(step, p, seed, time.perf_counter() - start, result, output.stage_seconds)
+    if os.environ.get(KILL_AFTER) == step.name:
+        os.kill(os.getpid(), signal.SIGKILL)
     if getattr(result, "failure", ""):
         raise StepFailed(step.name, result.failure)
     return result

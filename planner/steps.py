@@ -1,8 +1,10 @@
 """The step framework: each pipeline stage is a `Step` with declared inputs, parameters and result.
 
-A step's `run(ctx)` is a function of the scene, the results of the steps it needs, its frozen
-parameters and a seeded generator; it returns a frozen result dataclass (see `results.py`) that
-has a `stats()` method giving its key figures. `pipeline.py` lists the steps in order.
+A step's `run(ctx)` is a function of the scene, the results of the steps it needs (and the
+parameters they ran with), its frozen parameters and a seeded generator; it returns a `StepOutput`:
+a frozen result dataclass (see `results.py`, with a `stats()` method giving its key figures) and,
+separately, what the run measured (stage seconds), which goes to the session record, never into the
+result. `pipeline.py` lists the steps in order.
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .errors import RegraspError
+from .results import read_only
 from .task import Scene
 
 Progress = Callable[[float, str], None]
@@ -39,10 +42,21 @@ class StepContext:
 
     scene: Scene
     inputs: Mapping[str, Any]
+    input_params: Mapping[str, Any]  # step name -> the frozen parameters that step of `inputs` ran with
     params: Any
     rng: np.random.Generator
     progress: Progress = no_progress
-    timings: list[float] = dataclasses.field(default_factory=list)  # seconds of the step's stages, for its session record
+
+
+@dataclass(frozen=True)
+class StepOutput:
+    """What a step returns: its result, and apart from it the seconds of its stages (for its session record only)."""
+
+    result: Any
+    stage_seconds: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        read_only(self.result)
 
 
 @dataclass(frozen=True)
@@ -54,7 +68,7 @@ class Step:
     needs: tuple[str, ...]
     params: type
     result: type
-    run: Callable[[StepContext], Any]
+    run: Callable[[StepContext], StepOutput]
     seed_name: str = ""  # the name its generator's seed is derived from (default: its own); steps sharing one draw alike
 
     def seed(self, session_seed: int) -> int:

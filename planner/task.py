@@ -56,10 +56,6 @@ class Scene:
     meshes: dict[str, trimesh.Trimesh] = field(repr=False, default_factory=dict)  # every mesh the task names, by its task value
     handover: bool = False  # the task asks for a regrasp even when one arm reaches both placements
 
-    def object_at(self, T: np.ndarray) -> trimesh.Trimesh:
-        """The object mesh placed at a world pose."""
-        return self.object_mesh.copy().apply_transform(T)
-
 
 def _path(tab: Table, key: str, base: Path, search: Path) -> Path:
     """The file a field names, beside the task file or in `search`; a directory is refused by name."""

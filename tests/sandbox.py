@@ -69,3 +69,11 @@ def one_error_line(stderr: str) -> str:
     lines = [line for line in stderr.splitlines() if line.startswith("error:")]
     assert len(lines) == 1, stderr
     return lines[0]
+
+
+def forbid(monkeypatch: Any, target: str) -> None:
+    """Make the function at `target` ('module.name') raise: where a cache must serve, its builder may not run."""
+    def forbidden(*args: Any, **kwargs: Any) -> Any:
+        raise AssertionError(f"{target} ran: the cache should have served this")
+
+    monkeypatch.setattr(target, forbidden)

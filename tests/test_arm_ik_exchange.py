@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from planner.arm_ik import ArmIK
-from planner.exchange_grid import WristWaypoints, best_nodes, exchange_costs, grid_nodes
+from planner.exchange_grid import PalmWaypoints, best_nodes, exchange_costs, grid_nodes
 
 
 def test_ik_reaches_poses_of_random_configurations(default_scene):
@@ -31,7 +31,7 @@ def test_ik_reaches_poses_of_random_configurations(default_scene):
 
 def test_exchange_cost_is_minimal_over_free_nodes_by_brute_force():
     rng = np.random.default_rng(0)
-    w = WristWaypoints(*(rng.uniform(-0.5, 0.5, 3) for _ in range(6)))
+    w = PalmWaypoints(*(rng.uniform(-0.5, 0.5, 3) for _ in range(6)))
     nodes = grid_nodes(np.array([-0.3, -0.3, 0.0]), np.array([0.3, 0.3, 0.4]), 0.1)
     assert nodes.shape == (7 * 7 * 5, 3)
     free = rng.random(len(nodes)) > 0.3

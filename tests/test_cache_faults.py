@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from sandbox import regrasp, snapshot
+from sandbox import forbid, regrasp, snapshot
 
 from planner.task import Scene
 
@@ -23,6 +23,7 @@ class Entry:
     what: str  # how the warning names it
     get: Callable[[Scene], Any]
     same: Callable[[Any], Any]
+    builder: str  # the function that computes an entry ('module.name'): forbidden where the cache must serve
 
 
 def _grasps(scene: Scene) -> Any:
@@ -62,11 +63,13 @@ def _object(scene: Scene) -> Any:
 
 ENTRIES = {
     "grasps": Entry("grasps", "grasp list of the right hand", _grasps,
-                    lambda g: {k: v for k, v in g.to_json().items() if k != "seconds"}),
-    "roadmaps": Entry("roadmaps", "roadmap", _roadmap, lambda r: (r.node_q.tolist(), r.edges.tolist())),
-    "collision_pairs": Entry("collision_pairs", "self-collision pair set", _pairs, lambda p: p),
-    "workspaces": Entry("workspaces", "workspaces", _workspaces, lambda ws: [w.centres.tolist() for w in ws]),
-    "objects": Entry("objects", "objects", _object, lambda o: o.points.tolist()),
+                    lambda g: g.to_json(0.0), "planner.grasps.compute_grasp_list"),
+    "roadmaps": Entry("roadmaps", "roadmap", _roadmap, lambda r: (r.node_q.tolist(), r.edges.tolist()),
+                      "planner.roadmap.step.build_roadmap"),
+    "collision_pairs": Entry("collision_pairs", "self-collision pair set", _pairs, lambda p: p, "planner.collision.compute_pair_set"),
+    "workspaces": Entry("workspaces", "workspaces", _workspaces, lambda ws: [w.centres.tolist() for w in ws],
+                        "planner.finger_workspace.finger_workspace"),
+    "objects": Entry("objects", "objects", _object, lambda o: o.points.tolist(), "planner.object_model.build_object_model"),
 }
 
 
@@ -105,6 +108,7 @@ def test_unreadable_entry_is_deleted_recomputed_and_told(default_scene: Scene, t
     assert "\n" not in warnings[0]
     assert again == first, "the recomputed entry differs from the first"
     caplog.clear()
+    forbid(monkeypatch, entry.builder)
     with caplog.at_level(logging.WARNING, logger="regrasp.cache"):
         assert entry.same(entry.get(default_scene)) == first
     assert not caplog.records, "the recomputed entry was not written back readable"

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from sandbox import forbid
 
 from planner.collision import CollisionParams, _candidate_pairs, compute_pair_set, robot_pair_set, simplified_robot_geometry
 from planner.geometry import se3
@@ -92,6 +93,7 @@ def test_pair_set_is_deterministic_and_cached(default_scene, tmp_path, monkeypat
     monkeypatch.setenv("REGRASP_CACHE", str(tmp_path))
     c = robot_pair_set(robot, gm, params)
     assert list(tmp_path.rglob("*.json")), "the pair set was not cached"
+    forbid(monkeypatch, "planner.collision.compute_pair_set")
     assert robot_pair_set(robot, gm, params) == c == a
 
 

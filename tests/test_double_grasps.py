@@ -11,10 +11,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import trimesh
+from oracle import Oracle
 
-from planner.collision import build_collision_model
-from planner.environment import Obstacle
-from planner.exchange_grid import WristWaypoints, exchange_costs
+from planner.exchange_grid import PalmWaypoints, exchange_costs
 from planner.paths import ASSETS
 from planner.runner import run_pipeline
 from planner.session import Session
@@ -32,34 +31,10 @@ def planned(tmp_path_factory, default_scene):
     return session
 
 
-def independent_collisions(scene, q: np.ndarray, object_pose: np.ndarray, holding: tuple[str, ...]) -> list[tuple[str, str]]:
-    """Every colliding pair with the object built into a fresh model at its pose, all pairs through the narrow phase
-    (no broad phase, no subsets), minus the holding hands against the object."""
-    obj = Obstacle("object", "mesh", (), object_pose, mesh=scene.object_mesh)
-    cm = build_collision_model(scene.robot, scene.environment + (obj,))
-    gm = cm.geometry
-    gd = pin.GeometryData(gm)
-    for k in cm.subsets["env"]:
-        gd.collisionRequests[int(k)].security_margin = cm.params.env_padding
-    pin.computeCollisions(scene.robot.model, scene.robot.model.createData(), gm, gd, q, False)
-    names = [o.name for o in gm.geometryObjects]
-    hands = tuple(scene.robot.spec.arm(a).hand.prefix for a in holding)
-    out = []
-    for k, pair in enumerate(gm.collisionPairs):
-        if gd.collisionResults[k].isCollision():
-            a, b = names[pair.first], names[pair.second]
-            if "env/object" in (a, b) and (a.startswith(hands) or b.startswith(hands)):
-                continue
-            out.append((a, b))
-    return out
-
-
-def object_hits_obstacles(scene, object_pose: np.ndarray) -> bool:
-    """python-fcl (through trimesh) on the meshes: the object at a pose against every obstacle."""
-    manager = trimesh.collision.CollisionManager()
-    for ob in scene.environment:
-        manager.add_object(ob.name, ob.to_trimesh())
-    return manager.in_collision_single(scene.object_at(object_pose))
+@pytest.fixture(scope="module")
+def oracle(default_scene) -> Oracle:
+    """The independent oracle (tests/oracle.py): full URDF meshes through python-fcl, no code shared with the checker."""
+    return Oracle(default_scene)
 
 
 def assert_holds(scene, q: np.ndarray, arm: str, grasps, rank: int, object_pose: np.ndarray) -> None:
@@ -72,7 +47,7 @@ def assert_holds(scene, q: np.ndarray, arm: str, grasps, rank: int, object_pose:
     np.testing.assert_array_equal(q[robot.hand_idx[arm]], grasps.finger_q[rank])
 
 
-def test_grasp_and_place_configurations_are_valid(planned):
+def test_grasp_and_place_configurations_are_valid(planned, oracle):
     scene = planned.scene
     configs = planned.result("grasp_configs")
     assert not configs.failure
@@ -83,10 +58,10 @@ def test_grasp_and_place_configurations_are_valid(planned):
         assert free.sum() < len(free), f"{role}: the environment filter removed nothing (the desk must cut grasps from below)"
         for rank, q in zip(hand.rank, hand.q):
             assert_holds(scene, q, hand.arm, grasps, int(rank), pose)
-            assert independent_collisions(scene, q, pose, (hand.arm,)) == []
+            assert oracle.collisions(q, pose, hand.arm, None, True) == []  # the object on its support, in the hand
 
 
-def test_double_grasps_are_valid_and_ranked(planned):
+def test_double_grasps_are_valid_and_ranked(planned, oracle):
     scene = planned.scene
     dg = planned.result("double_grasps")
     pick, place = planned.result("pick_grasps"), planned.result("place_grasps")
@@ -102,17 +77,16 @@ def test_double_grasps_are_valid_and_ranked(planned):
         assert_holds(scene, dg.q_place[n], b, place, r2, scene.object_final)
         assert_holds(scene, dg.q_exch[n], a, pick, r1, T)
         assert_holds(scene, dg.q_exch[n], b, place, r2, T)
-        assert independent_collisions(scene, dg.q_grasp[n], scene.object_initial, (a,)) == []
-        assert independent_collisions(scene, dg.q_place[n], scene.object_final, (b,)) == []
-        assert independent_collisions(scene, dg.q_exch[n], T, (a, b)) == []
-        assert not object_hits_obstacles(scene, T), f"double grasp {n}: the object hits an obstacle at the exchange"
+        assert oracle.collisions(dg.q_grasp[n], scene.object_initial, a, None, True) == []
+        assert oracle.collisions(dg.q_place[n], scene.object_final, b, None, True) == []
+        assert oracle.collisions(dg.q_exch[n], T, a, b, False) == [], f"double grasp {n} at the exchange"  # the object too
         assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)) and np.isclose(np.linalg.det(T[:3, :3]), 1.0)
 
 
 def test_exchange_node_is_the_cheapest_free_node(planned):
     scene = planned.scene
     x = planned.result("exchange")
-    w = WristWaypoints(*x.waypoints)
+    w = PalmWaypoints(*x.waypoints)
     d = lambda p, r: float(np.linalg.norm(p - r))
     brute = np.array([d(w.pick_initial, w.pick_grasp) + d(w.pick_grasp, e) + d(e, w.pick_final)
                       + d(w.place_initial, e) + d(e, w.place_place) + d(w.place_place, w.place_final) for e in x.nodes])
@@ -133,10 +107,25 @@ def test_same_seed_same_double_grasps(planned, tmp_path):
     again = Session.create(tmp_path / "again", planned.scene, seed=SEED)
     run_pipeline(again, until="double_grasps")
     for name in ("grasp_configs", "exchange", "double_grasps"):
-        first, second = planned.result(name), again.result(name)
-        for field in ("pick_q", "place_q", "cost", "best", "q_exch", "object_exchange", "score"):
-            if hasattr(first, field):
-                np.testing.assert_array_equal(getattr(first, field), getattr(second, field))
+        for file in (f"{name}.npz", f"{name}.json"):
+            assert (planned.folder / file).read_bytes() == (again.folder / file).read_bytes(), file
+
+
+def test_exchange_ik_runs_with_the_sessions_grasp_config_parameters(planned, tmp_path, monkeypatch):
+    """`--set grasp_configs.<p>` reaches the double grasps' exchange IK (only its torso_sigma is the double grasps' own)."""
+    import planner.double_grasps as step
+
+    seen = []
+
+    class Spy(step.ConfigSampler):
+        def __init__(self, robot, collision, scorer, p):
+            seen.append(p)
+            super().__init__(robot, collision, scorer, p)
+
+    monkeypatch.setattr(step, "ConfigSampler", Spy)
+    branch = planned.branch(tmp_path / "branch", "grasp_configs")
+    run_pipeline(branch, "double_grasps", {"grasp_configs": {"ik_iterations": 31}, "double_grasps": {"torso_sigma": 0.05}})
+    assert [(p.ik_iterations, p.torso_sigma) for p in seen] == [(31, 0.05)]
 
 
 def _plan(*args: str) -> subprocess.CompletedProcess:

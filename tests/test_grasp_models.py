@@ -5,6 +5,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import trimesh
+from sandbox import forbid
 
 from planner.finger_workspace import WorkspaceParams, finger_workspace, hand_workspaces, sphere_hierarchy
 from planner.grasp_frames import box_grid, hopf_rotations
@@ -100,8 +101,9 @@ def test_sphere_hierarchy_stop_rules():
     assert len(none) == 0
 
 
-def test_workspaces_are_cached_per_hand(hand):
+def test_workspaces_are_cached_per_hand(hand, monkeypatch):
     first = hand_workspaces(hand)
+    forbid(monkeypatch, "planner.finger_workspace.finger_workspace")
     again = hand_workspaces(hand)
     for a, b in zip(first, again):
         assert np.array_equal(a.centres, b.centres) and np.array_equal(a.occupied, b.occupied)
@@ -124,8 +126,13 @@ def test_object_point_set_is_even_on_the_surface_with_outward_normals():
 def test_mean_curvature_is_signed():
     box = trimesh.creation.box(extents=[0.1, 0.1, 0.1])
     assert np.all(vertex_mean_curvature(box) > 0)  # convex corners
-    cached = object_model(box, 0.01)
-    assert np.array_equal(cached.points, object_model(box, 0.01).points)
+
+
+def test_object_models_are_cached_per_mesh_and_step(monkeypatch):
+    box = trimesh.creation.box(extents=[0.1, 0.1, 0.1])
+    built = object_model(box, 0.01)
+    forbid(monkeypatch, "planner.object_model.build_object_model")
+    assert np.array_equal(built.points, object_model(box, 0.01).points)
 
 
 def test_orientations_are_rotations_spread_evenly():

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_motion import Oracle
+from oracle import Oracle
 
 from planner.motion.space import JointSpace
 from planner.motion.timing import sample_polyline, segment_duration

@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from planner.errors import InputError
-from planner.object_mesh import ObjectInfo, load_object_mesh, object_info
+from planner.object_mesh import load_object_mesh
 from planner.statuette import STATUETTE_PATH
 
 FORMATS = ["obj", "stl", "ply", "off", "glb"]
@@ -129,19 +129,6 @@ def test_a_small_hole_is_filled(tmp_path: Path) -> None:
     box.export(path)
     mesh = load_object_mesh(path)
     assert mesh.is_watertight and mesh.volume == pytest.approx(0.001, rel=1e-5)
-
-
-def test_object_info_summarises_a_mesh(tmp_path: Path) -> None:
-    path = tmp_path / "box.off"
-    trimesh.creation.box([0.1, 0.2, 0.3]).export(path)
-    info = object_info(load_object_mesh(path))
-    assert isinstance(info, ObjectInfo)
-    assert (info.n_vertices, info.n_faces) == (8, 12)
-    assert info.extents == pytest.approx((0.1, 0.2, 0.3))
-    assert info.volume == pytest.approx(0.006)
-    assert info.center_mass == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
-    with pytest.raises(AttributeError):
-        info.volume = 1.0  # type: ignore[misc]
 
 
 # --- bad inputs: each names the file and what is wrong --------------------------------------------

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +14,7 @@ import pytest
 
 from planner.errors import InputError, RegraspError
 from planner.pipeline import PIPELINE
-from planner.runner import run_pipeline
+from planner.runner import KILL_AFTER, run_pipeline
 from planner.session import MANIFEST, Session
 
 
@@ -86,9 +86,11 @@ def test_existing_session_survives_without_force(planned, default_scene):
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
 
-def _plan(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(out), "--seed", "5", *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _plan(out: Path, *extra: str, seed: int = 5, kill_after: str = "") -> subprocess.CompletedProcess:
+    """`regrasp plan default` into `out`; with `kill_after`, the process kills itself once that step is saved (runner.py)."""
+    env = {**os.environ, KILL_AFTER: kill_after} if kill_after else None
+    return subprocess.run([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(out), "--seed", str(seed), *extra],
+                          capture_output=True, text=True, env=env, timeout=900)
 
 
 def _step_files(folder: Path) -> dict[str, bytes]:
@@ -98,21 +100,43 @@ def _step_files(folder: Path) -> dict[str, bytes]:
 @pytest.mark.slow
 def test_killed_plan_resumes_to_the_same_result(tmp_path):
     whole = tmp_path / "whole"
-    outcome = _plan(whole).wait(timeout=600)  # 0, or 1 when a step recorded a failure (the motion may find none)
+    outcome = _plan(whole).returncode  # 0, or 1 when a step recorded a failure (the motion may find none)
     assert outcome in (0, 1)
     assert [r["name"] for r in json.loads((whole / MANIFEST).read_text())["steps"]] == [s.name for s in PIPELINE]
     cut = tmp_path / "cut"
-    proc = _plan(cut)
-    time.sleep(2.0)  # inside the first step (building the collision model takes longer)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    if (cut / MANIFEST).exists():
-        Session.open(cut)  # whatever was finished is readable
-    resumed = _plan(cut, "--resume") if (cut / MANIFEST).exists() else _plan(cut)
-    assert resumed.wait(timeout=600) == outcome, resumed.stderr.read()
+    assert _plan(cut, kill_after="grasp_configs").returncode == -signal.SIGKILL
+    names = [s.name for s in PIPELINE]
+    assert Session.open(cut).finished() == names[: names.index("grasp_configs") + 1]  # what was finished is readable
+    resumed = _plan(cut, "--resume")
+    assert resumed.returncode == outcome, resumed.stderr
     assert _step_files(cut) == _step_files(whole)
     strip = lambda m: [{k: v for k, v in r.items() if k not in ("seconds", "stage_seconds")} for r in m["steps"]]
     assert strip(json.loads((cut / MANIFEST).read_text())) == strip(json.loads((whole / MANIFEST).read_text()))
+
+
+@pytest.mark.slow
+def test_the_same_run_from_a_warm_cache_writes_identical_step_files(planned, tmp_path):
+    """`plan default --seed 3` again, into another folder: the grasp lists and the roadmap now come from the user cache
+    (the first run, on this test session's fresh cache, computed them), yet every step file is byte-identical; each
+    session records its own run's seconds, and no statistic holds a time."""
+    folder, _ = planned
+    again = tmp_path / "again"
+    run = _plan(again, seed=3)
+    assert run.returncode == 0, run.stderr
+    assert _step_files(again) == _step_files(folder)
+    first, second = (json.loads((f / MANIFEST).read_text())["steps"] for f in (folder, again))
+    assert [r["stats"] for r in second] == [r["stats"] for r in first]
+    assert not [k for r in second for k in _keys(r["stats"]) if "second" in k], "a statistic holds a time"
+    assert all(r["seconds"] > 0 for r in first + second)
+    roadmap = next(r for r in second if r["name"] == "roadmap")
+    assert "stage_seconds" not in roadmap, "the second run's roadmap came from the cache: no build stage ran"
+
+
+def _keys(value) -> list[str]:
+    """Every key in a JSON value, nested ones included."""
+    if isinstance(value, dict):
+        return [k for key, v in value.items() for k in (key, *_keys(v))]
+    return [k for v in value for k in _keys(v)] if isinstance(value, list) else []
 
 
 @pytest.fixture

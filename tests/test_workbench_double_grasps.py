@@ -25,7 +25,7 @@ from test_workbench_browser import (
 from workbench.app import Workbench
 from workbench.layers import LAYERS
 from workbench.layers.double_grasps import DoubleGraspsLayer, pair_labels
-from workbench.layers.exchange import ExchangeLayer, cost_colors, wrist_routes
+from workbench.layers.exchange import ExchangeLayer, cost_colors, palm_routes
 from workbench.layers.grasp_configs import KEPT_COLOR, REMOVED_COLOR, GraspConfigsLayer, grasp_colors
 
 ONLINE = ("grasp_configs", "exchange", "double_grasps")
@@ -55,13 +55,13 @@ def workbench(tmp_path_factory) -> Iterator[Workbench]:
 
 
 def test_layer_helpers() -> None:
-    """Palm colours by how far a grasp got; cost colours cheap to expensive; each wrist's route passes the exchange."""
+    """Palm colours by how far a grasp got; cost colours cheap to expensive; each palm's route passes the exchange."""
     colors = grasp_colors(np.array([True, True, False]), np.array([1]))
     assert tuple(colors[1]) == KEPT_COLOR and tuple(colors[2]) == REMOVED_COLOR and tuple(colors[0]) != KEPT_COLOR
     ramp = cost_colors(np.array([1.0, 2.0, 3.0])).astype(int)
     assert ramp[0].sum() > ramp[1].sum() > ramp[2].sum(), "cheap nodes should be bright, expensive ones dark"
     w, x = np.arange(18.0).reshape(6, 3), np.array([9.0, 9.0, 9.0])
-    picking, placing = wrist_routes(w, x)
+    picking, placing = palm_routes(w, x)
     assert np.allclose(picking[1, 1], x) and np.allclose(placing[0, 1], x)
     assert np.allclose(picking[0, 0], w[0]) and np.allclose(picking[-1, 1], w[2])
     assert np.allclose(placing[0, 0], w[3]) and np.allclose(placing[-1, 1], w[5])

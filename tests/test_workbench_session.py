@@ -124,10 +124,11 @@ def test_bad_session_shows_its_error_and_the_workbench_stays_usable(workbench: W
     page.get_by_text("Could not load the session").first.wait_for(timeout=10_000)
     assert page.get_by_text("truncated or corrupt").count() > 0
     assert workbench.session is shown, "a bad session replaced the shown one"
+    panel.name.value = "before-the-load"  # the load sets the name last: once it reads "example", the load is over
     panel.saved.value = "example"
     page.get_by_role("button", name="Load", exact=True).click()
     assert _wait_for(lambda: workbench.session is not shown and workbench.session.folder == sessions_dir / "example", 30)
-    assert _wait_for(lambda: panel.name.value == "example"), "the panel did not follow the loaded session"
+    assert _wait_for(lambda: panel.name.value == "example", 30), "the panel did not follow the loaded session"
 
 
 @pytest.mark.browser
@@ -137,12 +138,7 @@ def test_save_never_overwrites_without_confirmation(workbench: Workbench, page: 
     (target / "notes.txt").write_text("keep me")
     before = _files(target)
     panel = workbench.session_panel
-    for _ in range(10):  # right after a load the page may still echo the old name back: set it until it stays
-        panel.name.value = "taken"
-        time.sleep(1.0)
-        if panel.name.value == "taken":
-            break
-    assert panel.name.value == "taken", panel.name.value
+    panel.name.value = "taken"  # no load is still going: the test before waits for its end
     dialog = page.get_by_text("Overwrite sessions/taken?")
     page.get_by_role("button", name="Save", exact=True).click()
     dialog.wait_for(timeout=60_000)  # software rendering under a loaded CI machine can be slow to draw the modal
@@ -204,8 +200,7 @@ def test_run_next_step_from_a_task(workbench: Workbench, monkeypatch: pytest.Mon
     assert workbench.session.folder.parent.parent != workbench.session_panel.sessions_dir
     assert seen and seen[-1] == 100 and len(seen) > 2, seen
     assert f"| {first} | done" in panel.table.content
-    if first in LAYERS:
-        assert first in workbench.session_layers.layers
+    assert first in LAYERS and first in workbench.session_layers.layers
 
 
 @pytest.mark.browser

@@ -1,14 +1,12 @@
 """Every finished step of a session drawn by its layer, from the saved results (nothing is recomputed)."""
 from __future__ import annotations
 
-from typing import Any
-
 import viser
 
 from planner.session import Session
 
 from .layers import LAYERS, StepLayer
-from .layers.base import Pose
+from .layers.base import Host, Pose
 from .notify import error_text
 from .rooted import Rooted
 
@@ -20,7 +18,7 @@ class SessionLayers(Rooted):
 
     A layer that fails to draw is dropped and its error kept in `errors`, so one bad layer never hides the rest."""
 
-    def __init__(self, server: viser.ViserServer, session: Session, root: str = ROOT, workbench: Any = None):
+    def __init__(self, server: viser.ViserServer, session: Session, root: str = ROOT, workbench: Host | None = None):
         super().__init__(server, root)
         self.layers: dict[str, StepLayer] = {}
         self.errors: dict[str, str] = {}

@@ -15,7 +15,7 @@ from ..collision import build_collision_model
 from ..double_grasps import DoubleGrasps
 from ..grasps import GraspList
 from ..roadmap.result import Roadmap
-from ..steps import Progress, Step, StepContext, no_progress
+from ..steps import Progress, Step, StepContext, StepOutput, no_progress
 from ..task import Scene
 from .graph import MotionGraph
 from .phases import HandGrasp, PhasePlanner, Piece, PieceFailed
@@ -137,12 +137,11 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
                   np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64))
 
 
-def run(ctx: StepContext) -> Motion:
+def run(ctx: StepContext) -> StepOutput:
     i = ctx.inputs
     motion, seconds = plan_motion(ctx.scene, i["pick_grasps"], i["place_grasps"], i["double_grasps"], i["roadmap"], ctx.params,
                                   ctx.rng, ctx.progress)
-    ctx.timings.extend(seconds)
-    return motion
+    return StepOutput(motion, tuple(seconds))
 
 
 NAME = "motion"

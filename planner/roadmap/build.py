@@ -92,8 +92,8 @@ def _check_all(pool: ProcessPoolExecutor, qa: np.ndarray, qb: np.ndarray, subset
     return np.concatenate([r[0] for r in results]), sum(r[1] for r in results)
 
 
-def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Progress = no_progress) -> Roadmap:
-    """Build both elementary roadmaps and their Super Graph (deterministic in `seed`)."""
+def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Progress = no_progress) -> tuple[Roadmap, dict[str, float]]:
+    """(both elementary roadmaps and their Super Graph (deterministic in `seed`), the seconds of each stage)."""
     cm, dec = roadmap_collision_model(scene, params)
     arms = dec.arms
     seeds = np.random.SeedSequence(seed).generate_state(len(arms), dtype=np.uint64)
@@ -144,7 +144,6 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
     return Roadmap(
         arms=list(arms),
         resolution=resolution(params),
-        timings=timings,
         checks=checks,
         candidates={"nodes": len(cand_q), "edges": len(cand)},
         vis_prm_samples={arm: e.samples for arm, e in zip(arms, (e0, e1))},
@@ -160,13 +159,13 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
         edges=edges,
         edge_length=np.linalg.norm(node_q[edges[:, 0]] - node_q[edges[:, 1]], axis=1),
         edge_valid=np.ones(len(edges), dtype=bool),
-    )
+    ), timings
 
 
 def wrist_positions(robot: Robot, q: np.ndarray) -> np.ndarray:
-    """(n, arms, 3) world positions of each hand's mount frame (the wrist) at each configuration."""
+    """(n, arms, 3) world positions of each arm's wrist frame (its hand's mount frame) at each configuration."""
     data = robot.model.createData()
-    fids = [robot.frame_id(arm.hand.mount_frame) for arm in robot.spec.arms]
+    fids = [robot.frame_id(robot.wrist_frame(arm)) for arm in robot.spec.arm_names]
     out = np.empty((len(q), len(fids), 3))
     for i, qi in enumerate(q):
         pin.framesForwardKinematics(robot.model, data, qi)

@@ -35,7 +35,6 @@ class Roadmap:
 
     arms: list
     resolution: dict
-    timings: dict  # stage -> seconds
     checks: dict  # stage -> collision checks
     candidates: dict  # 'nodes' / 'edges' -> how many were tested
     vis_prm_samples: dict  # arm -> samples drawn
@@ -65,27 +64,27 @@ class Roadmap:
             "components": int(len(np.unique(self.node_component))),
             "largest_component": int(np.bincount(self.node_component).max(initial=0)),
             "collision_checks": int(sum(self.checks.values())),
-            "seconds": round(float(sum(self.timings.values())), 3),
             "elementary_nodes": {a: int(np.sum(self.elem_arm == i)) for i, a in enumerate(self.arms)},
             "elementary_edges": {a: int(len(self.elementary(a)[1])) for a in self.arms},
             "candidate_nodes": int(self.candidates["nodes"]),
             "candidate_edges": int(self.candidates["edges"]),
-            "stage_seconds": {k: round(float(v), 3) for k, v in self.timings.items()},
             "stage_checks": {k: int(v) for k, v in self.checks.items()},
             "resolution": self.resolution,
         }
 
 
-def render_stats(stats: dict) -> str:
-    """The statistics table of `Roadmap.stats()`, as printed by `regrasp roadmap`."""
+def render_stats(stats: dict, seconds: dict[str, float]) -> str:
+    """The statistics table of `Roadmap.stats()` and the `seconds` of each stage built (none from the cache), for `regrasp roadmap`."""
     lines = [f"{name:<22}{stats[key]:>12}" for name, key in (("nodes", "nodes"), ("edges", "edges"), ("components", "components"),
                                                           ("largest component", "largest_component"),
                                                           ("collision checks", "collision_checks"))]
     for arm, n in stats["elementary_nodes"].items():
         lines.append(f"{'elementary ' + arm:<22}{n:>12} nodes {stats['elementary_edges'][arm]:>6} edges")
-    for stage, seconds in stats["stage_seconds"].items():
-        lines.append(f"{stage + ' (s)':<22}{seconds:>12.2f} {stats['stage_checks'][stage]:>12} checks")
-    lines.append(f"{'total (s)':<22}{stats['seconds']:>12.2f}")
+    for stage, checks in stats["stage_checks"].items():
+        time = f"{seconds[stage]:>12.2f}" if seconds else f"{'(cached)':>12}"
+        lines.append(f"{stage + ' (s)':<22}{time} {checks:>12} checks")
+    if seconds:
+        lines.append(f"{'total (s)':<22}{sum(seconds.values()):>12.2f}")
     res = stats["resolution"]
     lines.append(f"resolution: {res['bound']}: {res['obstacle_step_m']} m to obstacles, {res['robot_step_m']} m to the robot")
     return "\n".join(lines)

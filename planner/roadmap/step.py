@@ -6,15 +6,15 @@ from pathlib import Path
 import numpy as np
 
 from ..collision import CODE_VERSION as PAIRS_VERSION
-from ..results import load_result, save_result
-from ..steps import Progress, Step, StepContext, no_progress, step_seed
+from ..results import load_result, read_only, save_result
+from ..steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
 from ..task import Scene
 from ..user_cache import cache_key as hash_key
 from ..user_cache import cache_path, read_cached
 from .build import build_roadmap
 from .result import Roadmap, RoadmapParams
 
-CODE_VERSION = "roadmap-1"
+CODE_VERSION = "roadmap-2"  # 2: no timings in the roadmap
 
 
 def cache_key(scene: Scene, params: RoadmapParams, seed: int) -> str:
@@ -30,17 +30,17 @@ def cache_key(scene: Scene, params: RoadmapParams, seed: int) -> str:
 
 
 def roadmap_for(scene: Scene, params: RoadmapParams, seed: int, use_cache: bool = True,
-                progress: Progress = no_progress) -> tuple[Roadmap, bool]:
-    """(the roadmap, whether it came from the cache); a built roadmap is written to the cache."""
+                progress: Progress = no_progress) -> tuple[Roadmap, dict[str, float]]:
+    """(the roadmap, the seconds of each stage built: empty when it came from the cache); a built roadmap is written to the cache."""
     path = cache_path("roadmaps", cache_key(scene, params, seed))
     if use_cache:
         cached = read_cached([path.with_suffix(".json"), path.with_suffix(".npz")], lambda: load_result(Roadmap, path.parent, path.name),
                              "roadmap")
         if cached is not None:
-            return cached, True
-    roadmap = build_roadmap(scene, params, seed, progress)
+            return cached, {}
+    roadmap, seconds = build_roadmap(scene, params, seed, progress)
     save_result(roadmap, path.parent, path.name)
-    return roadmap, False
+    return read_only(roadmap), seconds
 
 
 def seed_of(rng: np.random.Generator) -> int:
@@ -53,8 +53,9 @@ def session_roadmap_seed(session_seed: int) -> int:
     return seed_of(np.random.default_rng(step_seed(session_seed, NAME)))
 
 
-def run(ctx: StepContext) -> Roadmap:
-    return roadmap_for(ctx.scene, ctx.params, seed_of(ctx.rng), progress=ctx.progress)[0]
+def run(ctx: StepContext) -> StepOutput:
+    roadmap, seconds = roadmap_for(ctx.scene, ctx.params, seed_of(ctx.rng), progress=ctx.progress)
+    return StepOutput(roadmap, tuple(seconds.values()))
 
 
 NAME = "roadmap"

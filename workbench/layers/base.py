@@ -3,16 +3,31 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import viser
 
 from planner.errors import RegraspError
+from planner.pipeline import step_named
 from planner.session import Session
 from planner.task import Scene
 
+from ..robot_layer import RobotLayer
 from ..rooted import Rooted
+from ..scene_layer import SceneLayer
+
+
+class Host(Protocol):
+    """What a layer may use of the live workbench: its robot (posed fully, or only its meshes), the scene's object, and
+    what the layers share (the layer toggles, the camera)."""
+
+    q: np.ndarray
+    robot_layer: RobotLayer | None
+    scene_layer: SceneLayer | None
+
+    def pose_robot(self, q: np.ndarray, object_pose: np.ndarray | None = None, label: str = ...) -> None:
+        """Put the robot at q and the object at `object_pose` (None: where it is); "Robot at" shows `label`."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,11 +41,12 @@ class Pose:
 class StepLayer(Rooted, ABC):
     """Draws one step's result; `update(result)` (re)draws it and fills `poses`: whole poses worth showing, by label."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Host | None = None,
+                 session: Session | None = None):
         super().__init__(server, root)
         self.server = server
         self.scene = scene
-        self.workbench = workbench  # the live Workbench whose robot a layer may pose; None in an HTML export
+        self.workbench = workbench  # the live workbench whose robot a layer may pose; None in an HTML export
         self.session = session  # the drawn Session: a layer reads the earlier steps' results it needs from it
         self.name = root
         self.poses: dict[str, Pose] = {}
@@ -46,6 +62,12 @@ class StepLayer(Rooted, ABC):
         if self.session is None:
             raise RegraspError(f"{type(self).__name__} needs the session to read step '{name}'")
         return self.session.result(name)
+
+    def params_of(self, name: str) -> Any:
+        """The frozen parameters the drawn session ran step `name` with (what its result was computed with)."""
+        if self.session is None:
+            raise RegraspError(f"{type(self).__name__} needs the session to read the parameters of step '{name}'")
+        return step_named(name).make_params(self.session.record_of(name)["params"])
 
     @abstractmethod
     def update(self, result: Any) -> None:

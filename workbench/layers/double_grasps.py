@@ -3,8 +3,6 @@ its exchange pose with both hands on it (the picking hand at its pick grasp, the
 its arm's colour), and buttons putting the robot at the pair's grasp, exchange or place configuration."""
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import viser
 
@@ -17,7 +15,7 @@ from planner.task import Scene
 from ..meshes import matrix_wxyz
 from ..scene_layer import OBJECT_COLOR
 from .arms import ARM_COLORS
-from .base import Pose, StepLayer
+from .base import Host, Pose, StepLayer
 from .hands import HandMeshes
 from .stages import stages_markdown
 
@@ -38,7 +36,8 @@ def pair_of(label: str) -> int:
 class DoubleGraspsLayer(StepLayer):
     """The ranked double grasps: the chosen pair on the object at the exchange, and the robot at one of its configurations."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Host | None = None,
+                 session: Session | None = None):
         super().__init__(server, scene, root, workbench, session)
         self.result: DoubleGrasps | None = None
         self.index = 0  # the pair shown

@@ -1,10 +1,8 @@
 """The `exchange` step drawn (paper V-C, fig. 6): the cheapest free grid nodes as one point cloud coloured by cost (yellow
 cheap, purple expensive; blocked nodes hidden; a slider sets the share shown, as the whole grid would hide the robot), a
-sphere at the chosen exchange position, and each wrist's route through it: picking wrist initial -> grasp -> exchange ->
-final, placing wrist initial -> exchange -> place -> final."""
+sphere at the chosen exchange position, and each palm's route through it: picking palm initial -> grasp -> exchange ->
+final, placing palm initial -> exchange -> place -> final."""
 from __future__ import annotations
-
-from typing import Any
 
 import numpy as np
 import viser
@@ -14,7 +12,7 @@ from planner.session import Session
 from planner.task import Scene
 
 from .arms import ARM_COLORS
-from .base import StepLayer
+from .base import Host, StepLayer
 from .stages import stages_markdown
 
 COLORMAP = np.array([(253, 231, 37), (94, 201, 98), (33, 145, 140), (59, 82, 139), (68, 1, 84)], float)  # viridis, reversed
@@ -37,8 +35,8 @@ def cost_colors(cost: np.ndarray) -> np.ndarray:
     return ((1 - f) * COLORMAP[i] + f * COLORMAP[i + 1]).astype(np.uint8)
 
 
-def wrist_routes(waypoints: np.ndarray, exchange: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(3, 2, 3) segments of each wrist's route through the exchange position (fig. 6): picking, then placing wrist."""
+def palm_routes(waypoints: np.ndarray, exchange: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3, 2, 3) segments of each palm's route through the exchange position (fig. 6): picking, then placing palm."""
     pi, pg, pf, qi, qp, qf = waypoints
     picking = np.array([[pi, pg], [pg, exchange], [exchange, pf]])
     placing = np.array([[qi, exchange], [exchange, qp], [qp, qf]])
@@ -46,9 +44,10 @@ def wrist_routes(waypoints: np.ndarray, exchange: np.ndarray) -> tuple[np.ndarra
 
 
 class ExchangeLayer(StepLayer):
-    """The exchange grid by cost, the best exchange position and the wrists' routes through it."""
+    """The exchange grid by cost, the best exchange position and the palms' routes through it."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Host | None = None,
+                 session: Session | None = None):
         super().__init__(server, scene, root, workbench, session)
         self.result: Exchange | None = None
         self.shown: viser.GuiSliderHandle | None = None
@@ -90,11 +89,11 @@ class ExchangeLayer(StepLayer):
                                           point_size=NODE_SIZE, point_shape="circle", precision="float32")
 
     def _draw_routes(self, result: Exchange, exchange: np.ndarray) -> None:
-        """Each wrist's waypoints and route in its arm's colour."""
+        """Each palm's waypoints and route in its arm's colour."""
         configs = self.earlier("grasp_configs")
         arms = self.scene.robot.spec.arm_names
         for route, arm, points in zip(("picking", "placing"), (configs.picking_arm, configs.placing_arm),
-                                      wrist_routes(result.waypoints, exchange)):
+                                      palm_routes(result.waypoints, exchange)):
             color = ARM_COLORS[arms.index(arm) % len(ARM_COLORS)]
             self.server.scene.add_line_segments(f"{self.name}/{route}/route", points.astype(np.float32), color,
                                                 thickness=ROUTE_THICKNESS)

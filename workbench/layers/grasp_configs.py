@@ -8,7 +8,7 @@ import numpy as np
 
 from planner.grasp_configs import GraspConfigs
 from planner.grasps import GraspList
-from planner.reach import grasp_centre
+from planner.reach import fingertip_centre
 
 from .base import Pose, StepLayer
 from .stages import stages_markdown
@@ -49,7 +49,7 @@ class GraspConfigsLayer(StepLayer):
             configs = result.hand(role)
             env_free = result.pick_env_free if role == "pick" else result.place_env_free
             T = self.scene.object_initial if placement == "initial" else self.scene.object_final
-            palms, strokes = palm_marks(grasps, np.asarray(T, float), grasp_centre(self.scene.robot, grasps.hand))
+            palms, strokes = palm_marks(grasps, np.asarray(T, float), fingertip_centre(self.scene.robot, grasps.hand))
             colors = grasp_colors(env_free, configs.rank)
             if len(palms):
                 self.server.scene.add_point_cloud(f"{self.name}/{role}/palms", palms.astype(np.float32), colors,

@@ -3,14 +3,12 @@ kd-tree leaf at the object's placement, and a rank selector: the chosen grasp's 
 contact points, normals, friction cones and scores; optionally the fingers' workspace sphere hierarchies."""
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import trimesh
 import viser
 
 from planner.finger_workspace import hand_workspaces
-from planner.grasps import GraspList, GraspParams, hand_spec_of
+from planner.grasps import GraspList, hand_spec_of
 from planner.hand_model import HandModel, load_hand_model
 from planner.object_model import object_model
 from planner.session import Session
@@ -18,7 +16,7 @@ from planner.task import Scene
 
 from ..meshes import matrix_wxyz
 from .arms import ARM_COLORS
-from .base import StepLayer
+from .base import Host, StepLayer
 from .hands import HAND_STYLE, HandMeshes
 
 POINT_SIZE = 0.004  # m
@@ -64,8 +62,10 @@ class GraspsLayer(StepLayer):
 
     placement = "initial"  # or "final": the scene's object pose the list is drawn at
     title = "Grasps"
+    step = "pick_grasps"  # the step whose result it draws (its recorded parameters made the point set and workspaces)
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Host | None = None,
+                 session: Session | None = None):
         super().__init__(server, scene, root, workbench, session)
         self.rank: viser.GuiDropdownHandle | None = None
         self.show_spheres: viser.GuiCheckboxHandle | None = None
@@ -85,14 +85,15 @@ class GraspsLayer(StepLayer):
         self.server.scene.add_frame(obj_node, show_axes=False, wxyz=wxyz, position=xyz)
         hand = load_hand_model(hand_spec_of(scene.robot.spec, result.hand))
         self.hand_model = hand
-        model = object_model(scene.object_mesh, GraspParams().point_step * min(result.tip_radius))
+        params = self.params_of(self.step)
+        model = object_model(scene.object_mesh, params.point_step * min(result.tip_radius))
         self.server.scene.add_point_cloud(f"{obj_node}/points", model.points.astype(np.float32), leaf_colors(model.leaf_ids()),
                                           point_size=POINT_SIZE, point_shape="circle", precision="float32")
         arms = scene.robot.spec.arm_names
         color = ARM_COLORS[arms.index(result.hand) % len(ARM_COLORS)] if result.hand in arms else HAND_STYLE[0]
         self.hand = HandMeshes(self.server, f"{obj_node}/hand", hand, color=color, opacity=1.0, visible=False)
         self._sphere_handles = []
-        for i, ws in enumerate(hand_workspaces(hand, GraspParams().workspace())):
+        for i, ws in enumerate(hand_workspaces(hand, params.workspace())):
             if len(ws.radii) == 0:
                 continue
             mesh = spheres_mesh(ws.centres, ws.radii)
@@ -139,7 +140,7 @@ class GraspsLayer(StepLayer):
     @staticmethod
     def summary(result: GraspList) -> str:
         return (f"{len(result)} grasps kept of {result.frames_tried} frames tried, μ={result.mu:g}, "
-                f"{result.cone_edges} cone edges, {result.seconds:.1f} s")
+                f"{result.cone_edges} cone edges")
 
     def scores_text(self, rank: int) -> str:
         r = self.result
@@ -192,3 +193,4 @@ class PlaceGraspsLayer(GraspsLayer):
 
     placement = "final"
     title = "Place grasps"
+    step = "place_grasps"

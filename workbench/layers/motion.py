@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from typing import Any
 
 import numpy as np
 import viser
@@ -23,7 +22,7 @@ from planner.task import Scene
 from ..meshes import matrix_wxyz
 from ..notify import error_text
 from ..scene_layer import OBJECT_COLOR
-from .base import StepLayer
+from .base import Host, StepLayer
 from .stages import FAILURE_COLOR
 
 TIMELINE = "motion: the timeline's sample"  # what "Robot at" says when the timeline posed the robot
@@ -71,7 +70,8 @@ class MotionLayer(StepLayer):
     """The trajectory on a timeline: the robot posed and the object drawn at the current sample; play / pause, speed,
     jumps to the keyframes, each wrist's route coloured by phase and Table I."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Host | None = None,
+                 session: Session | None = None):
         super().__init__(server, scene, root, workbench, session)
         self.result: Motion | None = None
         self.index = 0  # the sample shown

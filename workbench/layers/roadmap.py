@@ -11,20 +11,19 @@ from __future__ import annotations
 import colorsys
 import threading
 import time
-from typing import Any
 
 import numpy as np
 import viser
 
 from planner.roadmap.build import wrist_positions
 from planner.roadmap.query import QueryResult, RoadmapPlanner
-from planner.roadmap.result import Roadmap, RoadmapParams
+from planner.roadmap.result import Roadmap
 from planner.session import Session
 from planner.task import Scene
 
 from ..notify import error_text
 from .arms import ARM_COLORS
-from .base import Pose, StepLayer
+from .base import Host, Pose, StepLayer
 
 SHADES = (1.0, 0.55, 1.45, 0.8)  # brightness of the wrist's colour for the 1st, 2nd, ... largest component
 SMALL_COLOR = (150, 150, 150)  # components beyond SHADES
@@ -84,7 +83,8 @@ def frames(robot, path: np.ndarray) -> np.ndarray:
 class RoadmapLayer(StepLayer):
     """The Super Graph in wrist space, a chosen node, and planning to it from the robot's current configuration."""
 
-    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Any = None, session: Session | None = None):
+    def __init__(self, server: viser.ViserServer, scene: Scene, root: str, workbench: Host | None = None,
+                 session: Session | None = None):
         super().__init__(server, scene, root, workbench, session)
         self.roadmap: Roadmap | None = None
         self.last_query: QueryResult | None = None
@@ -169,18 +169,14 @@ class RoadmapLayer(StepLayer):
         self.job.start()
         return self.job
 
-    def _plan(self, wb: Any, i: int, q: np.ndarray, animation: int) -> None:
+    def _plan(self, wb: Host, i: int, q: np.ndarray, animation: int) -> None:
         roadmap = self.roadmap
         assert roadmap is not None
         try:
             with self._plan_lock:
                 if self._planner is None:
                     self._say("*Building the roadmap's collision model…*")
-                    res = roadmap.resolution
-                    params = RoadmapParams(env_padding=res.get("env_padding_m", RoadmapParams.env_padding),
-                                           self_padding=res.get("self_padding_m", RoadmapParams.self_padding),
-                                           env_clearance=res.get("env_clearance_m", RoadmapParams.env_clearance))
-                    self._planner = RoadmapPlanner(self.scene, roadmap, params)
+                    self._planner = RoadmapPlanner(self.scene, roadmap, self.params_of("roadmap"))
                 planner = self._planner
                 held = np.setdiff1d(np.arange(len(q)), planner.dec.transit)
                 moved = not np.allclose(q[held], planner.dec.q_hold[held])
@@ -203,7 +199,7 @@ class RoadmapLayer(StepLayer):
             self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, {len(result.nodes)} graph nodes, "
                       f"length {result.length:.2f} rad, {result.checks} checks. Robot at node {i}.")
 
-    def _animate(self, wb: Any, qs: np.ndarray, animation: int, label: str) -> None:
+    def _animate(self, wb: Host, qs: np.ndarray, animation: int, label: str) -> None:
         """Pose the robot at each of qs, at most FPS a second (slower when drawing is); stops when another action starts."""
         start = time.monotonic()
         for k, q in enumerate(qs):

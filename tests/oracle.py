@@ -1,0 +1,177 @@
+"""An independent collision oracle for tests: it shares no code with the planner's checker.
+
+The URDFs' own collision geometry (full link meshes, not hulls; the fingers' boxes and spheres)
+through python-fcl, posed by pinocchio's forward kinematics: the robot against the obstacles
+(zero margin), against the object at a given pose (holding hands excepted), the object against
+the obstacles, and links of different parts (each arm with its hand, the torso) against each
+other, except pairs the oracle itself finds touching at rest or joined by a joint.
+"""
+from __future__ import annotations
+
+import fcl
+import numpy as np
+import pinocchio as pin
+
+
+def _fcl_geometry(geom, scale) -> tuple[fcl.CollisionGeometry, np.ndarray | None]:
+    """The URDF collision shape as an fcl shape (and its vertices for a mesh)."""
+    if hasattr(geom, "vertices"):
+        v = np.asarray(geom.vertices()) * np.asarray(scale)
+        tris = np.array([[t[0], t[1], t[2]] for t in (geom.tri_indices(i) for i in range(geom.num_tris))], np.int32)
+        m = fcl.BVHModel()
+        m.beginModel(len(v), len(tris))
+        m.addSubModel(v, tris)
+        m.endModel()
+        return m, v
+    if hasattr(geom, "halfSide"):
+        return fcl.Box(*(2 * np.asarray(geom.halfSide))), None
+    if hasattr(geom, "halfLength"):
+        return fcl.Cylinder(geom.radius, 2 * geom.halfLength), None
+    return fcl.Sphere(geom.radius), None
+
+
+def _mesh(mesh) -> fcl.BVHModel:
+    m = fcl.BVHModel()
+    m.beginModel(len(mesh.vertices), len(mesh.faces))
+    m.addSubModel(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int32))
+    m.endModel()
+    return m
+
+
+def _fcl_geometry_of_obstacle(ob) -> tuple[fcl.CollisionGeometry, np.ndarray | None]:
+    if ob.shape == "box":
+        return fcl.Box(*ob.size), None
+    if ob.shape == "sphere":
+        return fcl.Sphere(ob.size[0]), None
+    if ob.shape == "cylinder":
+        return fcl.Cylinder(ob.size[0], ob.size[1]), None
+    if ob.shape == "capsule":
+        return fcl.Capsule(ob.size[0], ob.size[1]), None
+    return _mesh(ob.mesh), np.asarray(ob.mesh.vertices, float)
+
+
+def _tf(T: np.ndarray) -> fcl.Transform:
+    return fcl.Transform(np.asarray(T[:3, :3]), np.asarray(T[:3, 3]))
+
+
+def _radius(geom: fcl.CollisionGeometry, vertices: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """A bounding sphere (centre in the shape's frame, radius) of an fcl shape."""
+    if vertices is not None:
+        c = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+        return c, float(np.linalg.norm(vertices - c, axis=1).max())
+    if isinstance(geom, fcl.Box):
+        return np.zeros(3), float(np.linalg.norm(geom.side) / 2)
+    if isinstance(geom, (fcl.Cylinder, fcl.Capsule)):
+        return np.zeros(3), float(np.hypot(geom.radius, geom.lz / 2) + (geom.radius if isinstance(geom, fcl.Capsule) else 0))
+    return np.zeros(3), float(geom.radius)
+
+
+class Oracle:
+    """Independent collision checks of a robot configuration with the object at a pose (see the module docstring).
+
+    Bounding spheres screen the pairs; each pair whose spheres overlap is then tested exactly by python-fcl.
+    """
+
+    def __init__(self, scene):
+        robot = scene.robot
+        self.robot, self.model = robot, robot.model
+        self.data = robot.model.createData()
+        self.gm = robot.collision_model
+        self.gd = pin.GeometryData(self.gm)
+        objs = self.gm.geometryObjects
+        self.names = [o.name for o in objs]
+        self.moving = [g for g, o in enumerate(objs) if o.parentJoint > 0]
+        self.shapes, spheres = [], []
+        for o in objs:
+            geom, verts = _fcl_geometry(o.geometry, o.meshScale)
+            self.shapes.append(geom)
+            spheres.append(_radius(geom, verts))
+        self.centre = np.array([c for c, _ in spheres])
+        self.radius = np.array([r for _, r in spheres])
+        part = {}
+        for g, o in enumerate(objs):
+            q = self.model.joints[o.parentJoint].idx_q if o.parentJoint > 0 else -1
+            part[g] = next((a for a in robot.spec.arm_names if q in robot.arm_idx[a] or q in robot.hand_idx[a]), "torso")
+        self.hand = {a: {g for g in self.moving if self.model.joints[objs[g].parentJoint].idx_q in robot.hand_idx[a]
+                         or objs[g].name.startswith(robot.spec.arm(a).hand.prefix)} for a in robot.spec.arm_names}
+        self.env, centres, radii = [], [], []
+        for ob in scene.environment:
+            geom, verts = _fcl_geometry_of_obstacle(ob)
+            c, r = _radius(geom, verts)
+            self.env.append((ob.name, geom, ob.pose))
+            centres.append(ob.pose[:3, :3] @ c + ob.pose[:3, 3])
+            radii.append(r)
+        self.env_centre, self.env_radius = np.array(centres), np.array(radii)
+        self.object, verts = _mesh(scene.object_mesh), np.asarray(scene.object_mesh.vertices, float)
+        self.object_centre, self.object_radius = _radius(self.object, verts)
+        parents = self.model.parents
+        poses = self._poses(robot.q_rest)
+        pairs = [(i, j) for i in self.moving for j in range(len(objs)) if (j not in self.moving or i < j) and part[i] != part[j]
+                      and objs[i].parentJoint != objs[j].parentJoint
+                      and parents[objs[i].parentJoint] != objs[j].parentJoint and parents[objs[j].parentJoint] != objs[i].parentJoint
+                 and not hit(self.shapes[i], poses[i], self.shapes[j], poses[j])]
+        self.pairs = (np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs]))
+        self.supports = {name for name, geom, T in self.env for pose in (scene.object_initial, scene.object_final)
+                         if fcl.distance(fcl.CollisionObject(self.object, _tf(pose)), fcl.CollisionObject(geom, _tf(T)),
+                                         fcl.DistanceRequest(), fcl.DistanceResult()) < 0.005}
+
+    def _poses(self, q: np.ndarray) -> list[np.ndarray]:
+        pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd, q)
+        return [self.gd.oMg[g].homogeneous for g in range(len(self.names))]
+
+    def _posed(self, q: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+        """(each geometry's world pose, its bounding sphere's world centre) at q."""
+        poses = self._poses(q)
+        rot = np.array([T[:3, :3] for T in poses])
+        return poses, np.einsum("gij,gj->gi", rot, self.centre) + np.array([T[:3, 3] for T in poses])
+
+    def _environment_hits(self, poses: list[np.ndarray], centres: np.ndarray) -> list[str]:
+        moving = np.array(self.moving)
+        near = np.linalg.norm(centres[moving, None] - self.env_centre[None], axis=2) < self.radius[moving, None] + self.env_radius
+        return [f"{self.names[moving[a]]} with {self.env[e][0]}" for a, e in zip(*np.nonzero(near))
+                if hit(self.shapes[moving[a]], poses[moving[a]], self.env[e][1], self.env[e][2])]
+
+    def _self_hits(self, poses: list[np.ndarray], centres: np.ndarray) -> list[str]:
+        i, j = self.pairs
+        near = np.flatnonzero(np.linalg.norm(centres[i] - centres[j], axis=1) < self.radius[i] + self.radius[j])
+        return [f"{self.names[i[k]]} with {self.names[j[k]]}" for k in near
+                if hit(self.shapes[i[k]], poses[i[k]], self.shapes[j[k]], poses[j[k]])]
+
+    def _object_hits(self, poses: list[np.ndarray], centres: np.ndarray, object_pose: np.ndarray, excused: set[int]) -> list[str]:
+        moving = np.array(self.moving)
+        ocentre = object_pose[:3, :3] @ self.object_centre + object_pose[:3, 3]
+        near = np.linalg.norm(centres[moving] - ocentre, axis=1) < self.radius[moving] + self.object_radius
+        return [f"{self.names[g]} with the object" for g in moving[near]
+                if g not in excused and hit(self.shapes[g], poses[g], self.object, object_pose)]
+
+    def robot_collisions(self, q: np.ndarray) -> list[str]:
+        """Names of the colliding pairs of the robot alone at q (no object): its links against the obstacles and each other."""
+        poses, centres = self._posed(q)
+        return self._environment_hits(poses, centres) + self._self_hits(poses, centres)
+
+    def object_hits(self, q: np.ndarray, object_pose: np.ndarray) -> list[str]:
+        """Names of the robot links that hit the object at q (every link: nothing holds it)."""
+        return self._object_hits(*self._posed(q), object_pose, set())
+
+    def object_obstacle_hits(self, object_pose: np.ndarray, excused: set[str] = frozenset()) -> list[str]:
+        """Names of the obstacles (those in `excused` aside) the object at `object_pose` hits."""
+        ocentre = object_pose[:3, :3] @ self.object_centre + object_pose[:3, 3]
+        near = np.flatnonzero(np.linalg.norm(self.env_centre - ocentre, axis=1) < self.object_radius + self.env_radius)
+        return [f"the object with {self.env[e][0]}" for e in near
+                if self.env[e][0] not in excused and hit(self.object, object_pose, self.env[e][1], self.env[e][2])]
+
+    def collisions(self, q: np.ndarray, object_pose: np.ndarray, holder: str | None, active: str | None,
+                   near_support: bool) -> list[str]:
+        """Names of the colliding pairs at q along a motion (empty when free): the robot with the object at `object_pose`
+        (the `holder`'s and the `active` hand's links excepted) and, while held, the object with the obstacles (its
+        supports excepted when `near_support`)."""
+        poses, centres = self._posed(q)
+        excused = (self.hand[holder] if holder else set()) | (self.hand[active] if active else set())
+        found = self._environment_hits(poses, centres) + self._object_hits(poses, centres, object_pose, excused)
+        if holder is not None:
+            found += self.object_obstacle_hits(object_pose, self.supports if near_support else set())
+        return found + self._self_hits(poses, centres)
+
+
+def hit(a, Ta, b, Tb) -> bool:
+    return fcl.collide(fcl.CollisionObject(a, _tf(Ta)), fcl.CollisionObject(b, _tf(Tb)), fcl.CollisionRequest(), fcl.CollisionResult()) > 0
