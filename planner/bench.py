@@ -142,9 +142,9 @@ class MotionBench:
 
     def summary(self, planner: str) -> dict:
         """Medians over the seeds: total seconds, success fraction, and per phase Table I's figures."""
-        from .motion import PHASES
+        from .motion import PHASE_SECONDS, PHASES
 
-        runs = self.runs[planner]
+        runs, per = self.runs[planner], len(PHASE_SECONDS)
         phases = []
         for i, name in enumerate(PHASES):
             ok = [r for r in runs if r["phases_done"] > i]
@@ -152,10 +152,10 @@ class MotionBench:
             phases.append({"phase": name, "success": len(ok) / len(runs),
                            "nodes_planning": _median([r["nodes_planning"] for r in rows]),
                            "nodes_validating": _median([r["nodes_validating"] for r in rows]),
-                           "seconds_planning": _median([r["phase_seconds"][5 * i] for r in runs if r["phase_seconds"]]),
-                           "seconds_validating": _median([r["phase_seconds"][5 * i + 1] for r in runs if r["phase_seconds"]]),
-                           "seconds_reconnecting": _median([r["phase_seconds"][5 * i + 2] for r in runs if r["phase_seconds"]]),
-                           "seconds": _median([sum(r["phase_seconds"][5 * i: 5 * i + 5]) for r in runs if r["phase_seconds"]]),
+                           "seconds_planning": _median([r["phase_seconds"][per * i] for r in runs if r["phase_seconds"]]),
+                           "seconds_validating": _median([r["phase_seconds"][per * i + 1] for r in runs if r["phase_seconds"]]),
+                           "seconds_reconnecting": _median([r["phase_seconds"][per * i + 2] for r in runs if r["phase_seconds"]]),
+                           "seconds": _median([sum(r["phase_seconds"][per * i: per * (i + 1)]) for r in runs if r["phase_seconds"]]),
                            "edges_invalidated": _median([r["edges_invalidated"] for r in rows]),
                            "rrt_calls": _median([r["rrt_calls"] for r in rows]),
                            "path_length": _median([r["path_length"] for r in rows]), "duration": _median([r["duration"] for r in rows])})
@@ -164,16 +164,18 @@ class MotionBench:
 
     def where(self, planner: str) -> dict:
         """Medians over the seeds of the seconds spent in each kind of work, summed over the phases of the motion found
-        ('other': the double grasps given up before it, and setting up; the baseline's RRTConnect queries count as
-        graph search)."""
-        kinds = ("graph search", "validation", "RRT", "shortcutting", "contact motions")
+        ('other': the wall time minus the rest: the double grasps given up before it and setting up, less the time the
+        phases' transits saved by running in parallel; the baseline's RRTConnect queries count as graph search)."""
+        from .motion import PHASE_SECONDS
+
+        kinds, per = ("graph search", "validation", "RRT", "shortcutting", "contact motions"), len(PHASE_SECONDS)
         rows = {k: [] for k in (*kinds, "timing and sampling", "other")}
         for r in self.runs[planner]:
             sec = r["phase_seconds"]
             if not sec:
                 continue
             for j, kind in enumerate(kinds):
-                rows[kind].append(sum(sec[5 * i + j] for i in range(len(sec) // 5)))
+                rows[kind].append(sum(sec[per * i + j] for i in range(len(sec) // per)))
             rows["timing and sampling"].append(sec[-1])
             rows["other"].append(r["seconds"] - sum(sec))
         return {k: _median(v) for k, v in rows.items()}
@@ -189,7 +191,8 @@ class MotionBench:
                 out.append(f"{r['phase']:<7}{r['nodes_planning']:>11.0f}{r['seconds_planning']:>8.2f}{r['nodes_validating']:>10.0f}"
                            f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['rrt_calls']:>5.0f}{r['seconds']:>9.2f}"
                            f"{r['success']:>8.0%}{r['path_length']:>8.2f}{r['duration']:>9.2f}")
-            out.append("where the time goes (median s): " + ", ".join(f"{k} {v:.2f}" for k, v in s["where"].items()))
+            out.append("where the time goes (median s): " + ", ".join(f"{k} {v:.2f}" for k, v in s["where"].items())
+                       + " (other: the wall time minus the rest; below 0 when the phases' transits ran in parallel)")
             out.append("")
         d = self.to_dict()
         out.append(f"speedup (RRTConnect median / ours): {d['speedup']:.2f}" if d["speedup"] else "speedup: n/a")

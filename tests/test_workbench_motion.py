@@ -28,7 +28,7 @@ from test_workbench_browser import (
     _wait_for,
 )
 
-from planner.motion.result import PHASES, Motion
+from planner.motion.result import PHASE_SECONDS, PHASES, Motion
 from planner.session import Session
 from workbench.app import Workbench
 from workbench.export import EXPORT_FPS, MAX_FRAMES, frame_samples
@@ -107,7 +107,8 @@ def test_layer_helpers(layer: MotionLayer) -> None:
         assert len(s) - 1 <= (t[-1] - t[0]) * EXPORT_FPS + 1
     seconds = layer.session.record_of("motion")["stage_seconds"]
     table = table_one(r, seconds)
-    assert len(seconds) == 4 * len(PHASES) and all(p in table for p in PHASES) and f"{seconds[5]:.3f}" in table
+    assert len(seconds) == len(PHASE_SECONDS) * len(PHASES) + 1 and all(p in table for p in PHASES)
+    assert f"{seconds[len(PHASE_SECONDS) + 1]:.3f}" in table  # the Carry phase's validation
     assert FAILURE_COLOR not in layer.summary(r)
     failed = layer.summary(dataclasses.replace(r, failure="Carry phase, transit: no path"))
     assert FAILURE_COLOR in failed and "Carry phase, transit: no path" in failed

@@ -8,6 +8,8 @@ import numpy as np
 from ..results import array
 
 PHASES = ("Grasp", "Carry", "Place", "Rest")
+PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "contact")  # the step's stage seconds per phase,
+# in this order, then one for timing and sampling
 
 
 @dataclass(frozen=True)

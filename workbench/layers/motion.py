@@ -15,7 +15,7 @@ import time
 import numpy as np
 import viser
 
-from planner.motion.result import PHASES, Motion
+from planner.motion.result import PHASE_SECONDS, PHASES, Motion
 from planner.session import Session
 from planner.task import Scene
 
@@ -33,7 +33,6 @@ ROUTE_THICKNESS = 0.004  # m
 FPS = 30.0  # frames a second at most while playing (samples are skipped when the trajectory's rate or the speed is higher)
 SPEEDS = (0.1, 4.0)  # playback speed range (1 = real time)
 KEYFRAMES = ("initial", "q_grasp", "q_exch", "q_place", "final")  # `Motion.keyframes` (not "exchange": the Double grasps folder has it)
-STAGE_SECONDS = ("planning", "validating", "shortcutting", "contact")  # the record's 4 seconds per phase, in order
 
 
 def route_segments(result: Motion) -> tuple[np.ndarray, np.ndarray]:
@@ -50,14 +49,14 @@ def route_segments(result: Motion) -> tuple[np.ndarray, np.ndarray]:
 
 def table_one(result: Motion, seconds: list[float] | None) -> str:
     """Table I of the session as markdown, one column per phase: nodes added planning / validating, the seconds of
-    planning, validating, shortcutting and contact motions (from the session record; '–' when absent), edges
-    invalidated, RRT calls, path length and duration."""
-    phases = result.phases
-    secs = seconds if seconds and len(seconds) >= 4 * len(phases) else None
+    planning, validating, reconnecting, shortcutting and contact motions (from the session record; '–' when absent),
+    edges invalidated, RRT calls, path length and duration."""
+    phases, per = result.phases, len(PHASE_SECONDS)
+    secs = seconds if seconds and len(seconds) >= per * len(phases) else None
     rows = [("nodes planning", [str(p["nodes_planning"]) for p in phases]),
             ("nodes validating", [str(p["nodes_validating"]) for p in phases])]
-    rows += [(f"s {stage}", [f"{secs[4 * k + j]:.3f}" if secs else "–" for k in range(len(phases))])
-             for j, stage in enumerate(STAGE_SECONDS)]
+    rows += [(f"s {stage}", [f"{secs[per * k + j]:.3f}" if secs else "–" for k in range(len(phases))])
+             for j, stage in enumerate(PHASE_SECONDS)]
     rows += [("edges invalidated", [str(p["edges_invalidated"]) for p in phases]),
              ("RRT calls", [str(p["rrt_calls"]) for p in phases]),
              ("length (rad)", [f"{p['path_length']:.2f}" for p in phases]),
