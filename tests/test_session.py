@@ -86,8 +86,9 @@ def test_existing_session_survives_without_force(planned, default_scene):
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
 
-def _plan(out: Path, *extra: str, seed: int = 5, kill_after: str = "") -> subprocess.CompletedProcess:
-    """`regrasp plan default` into `out`; with `kill_after`, the process kills itself once that step is saved (runner.py)."""
+def _plan(out: Path, *extra: str, seed: int = 3, kill_after: str = "") -> subprocess.CompletedProcess:
+    """`regrasp plan default` into `out` (seed 3, as `planned`: the grasp lists and roadmap come from this test session's
+    cache); with `kill_after`, the process kills itself once that step is saved (runner.py)."""
     env = {**os.environ, KILL_AFTER: kill_after} if kill_after else None
     return subprocess.run([sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(out), "--seed", str(seed), *extra],
                           capture_output=True, text=True, env=env, timeout=900)
