@@ -448,7 +448,12 @@ class PhasePlanner:
         pin.updateGeometryPlacements(self.robot.model, self.data, gm, gd, q)
         hand = [g for g in range(self.cm.n_robot_geoms) if self.cm.parts[g] == f"{arm}_hand"]
         bodies = [(self.shape, pose)] + [(gm.geometryObjects[g].geometry, gd.oMg[g].homogeneous) for g in hand]
-        obstacles = [(ob.coal_shape(), transform3s(ob.pose)) for ob in self.scene.environment]
+        # obstacles whose bounding sphere stays farther than the padding from the bodies' at every offset cannot count
+        centre, reach = _bounding_sphere(bodies)
+        reach += 2.0 * self.p.lift + self.transit_profile.env_padding
+        obstacles = [(shape, transform3s(ob.pose)) for ob in self.scene.environment
+                     for shape in [ob.coal_shape()] for c, r in [_bounding_sphere([(shape, ob.pose)])]
+                     if np.linalg.norm(c - centre) < r + reach]
         req, res = coal.DistanceRequest(), coal.DistanceResult()
 
         def clearance(offset: np.ndarray) -> float:
@@ -519,6 +524,16 @@ def freest(options: Iterator[tuple]) -> Iterator[tuple]:
         if not held:
             raise
     yield from sorted(held, key=lambda o: -o[2])
+
+
+def _bounding_sphere(bodies: list[tuple[coal.CollisionGeometry, np.ndarray]]) -> tuple[np.ndarray, float]:
+    """(centre, radius) of a sphere holding every (shape, world pose), from their bounding boxes."""
+    spheres = []
+    for shape, placed in bodies:
+        shape.computeLocalAABB()
+        spheres.append((placed[:3, :3] @ np.asarray(shape.aabb_center) + placed[:3, 3], float(shape.aabb_radius)))
+    centre = spheres[0][0]
+    return centre, max(float(np.linalg.norm(c - centre)) + r for c, r in spheres)
 
 
 def _pairs(pairs: list[tuple[str, str]], most: int = 3) -> str:
