@@ -165,6 +165,7 @@ def read_npz(path: Path) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as npz:
             return {k: npz[k] for k in npz.files}
+    # NotImplementedError: what zipfile raises for a compression method it does not support (a crafted entry)
     except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError, NotImplementedError) as exc:
         raise InputError(path, None, f"not a readable .npz file (truncated or corrupt: {type(exc).__name__}: {exc})") from exc
 

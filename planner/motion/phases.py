@@ -527,11 +527,18 @@ def freest(options: Iterator[tuple]) -> Iterator[tuple]:
 
 
 def _bounding_sphere(bodies: list[tuple[coal.CollisionGeometry, np.ndarray]]) -> tuple[np.ndarray, float]:
-    """(centre, radius) of a sphere holding every (shape, world pose), from their bounding boxes."""
+    """(centre, radius) of a sphere holding every (shape, world pose): meshes by their vertices (the robot's shapes are
+    shared: they are only read), primitives by the bounding box they compute (each caller's own fresh shape)."""
     spheres = []
     for shape, placed in bodies:
-        shape.computeLocalAABB()
-        spheres.append((placed[:3, :3] @ np.asarray(shape.aabb_center) + placed[:3, 3], float(shape.aabb_radius)))
+        if hasattr(shape, "points") or hasattr(shape, "vertices"):
+            pts = np.asarray(shape.points() if hasattr(shape, "points") else shape.vertices())
+            mid = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+            radius = float(np.linalg.norm(pts - mid, axis=1).max())
+        else:
+            shape.computeLocalAABB()
+            mid, radius = np.asarray(shape.aabb_center), float(shape.aabb_radius)
+        spheres.append((placed[:3, :3] @ mid + placed[:3, 3], radius))
     centre = spheres[0][0]
     return centre, max(float(np.linalg.norm(c - centre)) + r for c, r in spheres)
 

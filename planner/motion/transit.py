@@ -155,7 +155,9 @@ class LazyTransit:
         ids = np.flatnonzero((comp == comp[other]) & (self.status.node != INVALID))
         goals: list[int] = []
         for n in ids[np.argsort(self.space.distance(self.graph.q[ids], self.graph.q[root]), kind="stable")][: 3 * self.p.goal_nodes]:
-            if len(goals) < self.p.goal_nodes and self._node_valid(int(n)):
+            if len(goals) == self.p.goal_nodes:
+                break
+            if self._node_valid(int(n)):
                 goals.append(int(n))
         return root, goals or [other]
 
