@@ -16,9 +16,12 @@ import numpy as np
 import pytest
 from oracle import Oracle
 
+from planner.motion.result import MotionParams
 from planner.motion.space import JointSpace
 from planner.motion.timing import sample_polyline, segment_duration
+from planner.motion.transit import TransitParams
 
+TRANSIT = TransitParams.of(MotionParams())
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
 
 
@@ -77,7 +80,7 @@ def test_lazy_transit_goes_around_the_object(example):
     from planner.geometry import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.situation import Situation, situation_model
-    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+    from planner.motion.transit import LazyTransit, TransitStats
     from planner.motion.validity import make_validity, transit_profile
 
     scene, roadmap, _ = example
@@ -92,7 +95,7 @@ def test_lazy_transit_goes_around_the_object(example):
     q_start, q_goal = scene.q_initial, roadmap.node_q[nodes[far]]
     space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
     free = make_validity(situation_model(cm, shape, Situation(None, np.diag([1.0, 1, 1, 1]) @ _far()), (), idx), profile, "moving")
-    first = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TransitParams(), np.random.default_rng(0),
+    first = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TRANSIT, np.random.default_rng(0),
                         TransitStats()).query(q_start, q_goal)
     # the object where the first path's wrist passes, half way along
     mid = first[len(first) // 2]
@@ -106,7 +109,7 @@ def test_lazy_transit_goes_around_the_object(example):
     blocked = make_validity(situation_model(cm, shape, situation, (), idx), profile, "moving")
     assert not blocked.state_valid(mid), "the object must block the first path"
     stats = TransitStats()
-    path = LazyTransit(MotionGraph(roadmap), space, blocked.on("changed"), blocked, blocked, TransitParams(), np.random.default_rng(0),
+    path = LazyTransit(MotionGraph(roadmap), space, blocked.on("changed"), blocked, blocked, TRANSIT, np.random.default_rng(0),
                        stats).query(q_start, q_goal)
     assert stats.searches > 1, "the first path must have been rejected and the graph searched again"
     assert not np.any(np.all(np.isclose(path, mid), axis=1)), "the blocked configuration is not on the new path"
@@ -134,7 +137,7 @@ def test_rrt_reconnects_what_the_graph_cannot(example):
     from planner.geometry import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.situation import Situation, situation_model
-    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+    from planner.motion.transit import LazyTransit, TransitStats
     from planner.motion.validity import make_validity, transit_profile
 
     scene, roadmap, _ = example
@@ -149,7 +152,8 @@ def test_rrt_reconnects_what_the_graph_cannot(example):
     q_goal = roadmap.node_q[int(np.argmax(space.distance(roadmap.node_q, q_start)))]
     graph, stats = MotionGraph(cut), TransitStats()
     edges_before = len(graph.edges)
-    path = LazyTransit(graph, space, validity.on("changed"), validity, validity, TransitParams(max_connections=8), np.random.default_rng(1),
+    narrow = dataclasses.replace(TRANSIT, max_connections=8)
+    path = LazyTransit(graph, space, validity.on("changed"), validity, validity, narrow, np.random.default_rng(1),
                        stats).query(q_start, q_goal)
     assert stats.rrt_calls >= 1 and stats.nodes_validating > 0
     assert len(graph.edges) > edges_before + 16, "the reconnection's path joined the graph"
@@ -167,7 +171,7 @@ def carried(example):
     from planner.geometry import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.situation import Situation, situation_model
-    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+    from planner.motion.transit import LazyTransit, TransitStats
     from planner.motion.validity import make_validity, transit_profile
 
     scene, roadmap, _ = example
@@ -194,7 +198,7 @@ def carried(example):
         q_goal = roadmap.node_q[goal_node]
         if free.motion_valid(q_start, q_goal):
             continue  # a straight line: the graph is not searched
-        alone = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TransitParams(), np.random.default_rng(0),
+        alone = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TRANSIT, np.random.default_rng(0),
                             TransitStats()).query(q_start, q_goal)
         for axis in np.vstack([np.eye(3), -np.eye(3)]):
             hold = np.eye(4)
@@ -213,14 +217,14 @@ def _carry(example, case, first: bool = False) -> tuple[list[str], object]:
     object's pairs (with `first`, up to the first configuration where it finds something), the transit's stats)."""
     from planner.motion.graph import MotionGraph
     from planner.motion.situation import Situation, situation_model
-    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+    from planner.motion.transit import LazyTransit, TransitStats
     from planner.motion.validity import make_validity
 
     _, roadmap, _ = example
     c = case
     validity = make_validity(situation_model(c["cm"], c["shape"], Situation(c["arm"], c["hold"]), (), c["idx"]), c["profile"], "moving")
     stats = TransitStats()
-    path = LazyTransit(MotionGraph(roadmap), c["space"], validity.on("changed"), validity, validity, TransitParams(),
+    path = LazyTransit(MotionGraph(roadmap), c["space"], validity.on("changed"), validity, validity, TRANSIT,
                        np.random.default_rng(0), stats).query(c["q_start"], c["q_goal"])
     assert np.allclose(path[0], c["q_start"]) and np.allclose(path[-1], c["q_goal"])
     found = (c["oracle"].collisions(a + s * (b - a), c["at"](a + s * (b - a)), c["arm"], None, False)

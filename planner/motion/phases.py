@@ -95,8 +95,7 @@ class PhasePlanner:
         self.data = self.robot.model.createData()
         self.iks: dict[tuple[str, ...], ArmIK] = {}  # one solver (and its scratch data) per set of arms
         self.stats = [TransitStats() for _ in PHASES]
-        self.transit_params = TransitParams(params.connections, params.max_connections, params.max_searches, params.max_reconnections,
-                                            params.reconnect_motions, params.rrt_motions, params.rrt_step, params.shortcut_attempts)
+        self.transit_params = TransitParams.of(params)
         robot = self.robot
         self.transit_idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
         self.open = robot.q_rest

@@ -14,6 +14,7 @@ with RRT trees. The single-query baseline (`rrt_transit`) runs RRTConnect alone 
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -27,15 +28,22 @@ from .validity import MotionValidity
 
 @dataclass(frozen=True)
 class TransitParams:
-    connections: int = 4  # valid edges joining each query end to the graph (nearest nodes first) ...
-    max_connections: int = 48  # ... among at most this many nearest nodes tried
-    max_searches: int = 60  # searches after invalidations before giving up
-    max_reconnections: int = 2  # RRTConnect calls per transit
-    reconnect_motions: int = 1000  # motion checks per RRTConnect reconnection (a budget, unlike seconds, is the same on any machine)
-    rrt_motions: int = 20000  # motion checks per RRTConnect query of the baseline
-    rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension)
-    shortcut_attempts: int = 16
-    goal_nodes: int = 16  # reconnecting an end cut off from the graph: valid graph nodes nearest it the tree may reach
+    """The transit planners' share of the motion step's parameters (see MotionParams for what each means)."""
+
+    connections: int
+    max_connections: int
+    max_searches: int
+    max_reconnections: int
+    reconnect_motions: int
+    rrt_motions: int
+    rrt_step: float
+    shortcut_attempts: int
+    goal_nodes: int
+
+    @classmethod
+    def of(cls, params) -> "TransitParams":
+        """The fields of the same names of a MotionParams."""
+        return cls(**{f.name: getattr(params, f.name) for f in dataclasses.fields(cls)})
 
 
 @dataclass
