@@ -124,10 +124,11 @@ class GraspsLayer(StepLayer):
         return np.asarray(self.scene.object_initial if self.placement == "initial" else self.scene.object_final, float)
 
     def _rank_chosen(self, event: viser.GuiEvent) -> None:
-        """Show the chosen rank; chosen by a person, it also gets the focus: the rest dimmed, the object framed."""
-        self.show(self.rank_of(event.target.value))
+        """Show the chosen rank; chosen by a person, it first gets the focus (the rest dimmed, the object framed), so that
+        a shown rank means a finished focus."""
         if event.client is not None and self.workbench is not None:
             self.workbench.focus_grasp(self.step, self.object_pose)
+        self.show(self.rank_of(event.target.value))
 
     @staticmethod
     def rank_labels(result: GraspList) -> tuple[str, ...]:
