@@ -182,9 +182,16 @@ class CollisionModel:
     n_robot_geoms: int
     parts: tuple[str, ...]
     subsets: dict[str, np.ndarray]
+    ends: np.ndarray  # (n_pairs, 2) the geometry indices of each collision pair (read once: the pair list is slow to walk)
+    support: np.ndarray  # (n_geometries, nq) bool: the joints that move each geometry
 
     def checker(self) -> "CollisionChecker":
         return CollisionChecker(self)
+
+    def relative_joints(self) -> np.ndarray:
+        """(n_pairs, nq) bool: the joints whose motion changes each pair's relative pose (a joint above both geometries
+        moves them rigidly together, so it is not one of them)."""
+        return self.support[self.ends[:, 0]] ^ self.support[self.ends[:, 1]]
 
     def with_subsets(self, extra: dict[str, np.ndarray]) -> "CollisionModel":
         """The same model with more named pair subsets (pair indices), for a caller's own checks."""
@@ -210,8 +217,8 @@ def build_collision_model(robot: Robot, environment: Environment = (), params: C
             continue  # the fixed base against fixed obstacles is checked once, by `check` of the task
         for e in range(n_robot, len(gm.geometryObjects)):
             gm.addCollisionPair(pin.CollisionPair(i, e))
-    first = np.array([cp.first for cp in gm.collisionPairs], dtype=int)
-    second = np.array([cp.second for cp in gm.collisionPairs], dtype=int)
+    ends = pair_ends(gm)
+    first, second = ends[:, 0], ends[:, 1]
     part = np.array(parts + ("env",) * (len(gm.geometryObjects) - n_robot))
     pa, pb = part[first], part[second]
     k = np.arange(len(first))
@@ -223,15 +230,29 @@ def build_collision_model(robot: Robot, environment: Environment = (), params: C
         subsets[f"{arm}_hand"] = k[(pa == f"{arm}_hand") | (pb == f"{arm}_hand")]
     hands = [f"{a}_hand" for a in robot.spec.arm_names]
     subsets["hands"] = k[((pa == hands[0]) & (pb == hands[1])) | ((pa == hands[1]) & (pb == hands[0]))]
-    return CollisionModel(robot, gm, pair_set, params, n_robot, parts, subsets)
+    support = joint_support(robot.model, [o.parentJoint for o in gm.geometryObjects])
+    return CollisionModel(robot, gm, pair_set, params, n_robot, parts, subsets, ends, support)
+
+
+def pair_ends(gm: pin.GeometryModel) -> np.ndarray:
+    """(n_pairs, 2) the geometry indices of each collision pair of a geometry model."""
+    return np.array([(cp.first, cp.second) for cp in gm.collisionPairs], dtype=np.int64).reshape(-1, 2)
+
+
+def joint_support(model: pin.Model, parents: list[int]) -> np.ndarray:
+    """(len(parents), nq) bool: the joints whose motion moves a geometry on each parent joint (those supporting it)."""
+    support = np.zeros((len(parents), model.nq), dtype=bool)
+    for g, parent in enumerate(parents):
+        for j in list(model.supports[parent])[1:]:
+            support[g, model.joints[j].idx_q] = True
+    return support
 
 
 def geometry_data(cm: CollisionModel, subset: str) -> pin.GeometryData:
     """Fresh collision data of `cm` with only the subset's pairs active, each padded as the model's parameters say
     (set with one call each: a Python loop over thousands of pairs cost more than checking a short motion)."""
-    gm = cm.geometry
+    gm, ends = cm.geometry, cm.ends
     n = len(gm.geometryObjects)
-    ends = np.array([(cp.first, cp.second) for cp in gm.collisionPairs], dtype=np.int64).reshape(-1, 2)
 
     def table(per_pair: np.ndarray) -> np.ndarray:
         out = np.zeros((n, n), dtype=per_pair.dtype)

@@ -38,6 +38,16 @@ class Robot:
     def nq(self) -> int:
         return self.model.nq
 
+    @functools.cached_property
+    def joint_axes(self) -> np.ndarray:
+        """(njoints, 3) each joint's rotation axis in its own frame (row 0: the universe, unused), for displacement bounds."""
+        data = self.model.createData()
+        pin.computeJointJacobians(self.model, data, pin.neutral(self.model))
+        axes = np.zeros((self.model.njoints, 3))
+        for j in range(1, self.model.njoints):
+            axes[j] = pin.getJointJacobian(self.model, data, j, pin.LOCAL)[3:, self.model.joints[j].idx_v]
+        return axes
+
     def part_idx(self, part: str) -> np.ndarray:
         """q indices of 'torso', an arm name, '<arm>_hand', or '<arm>_hand/<finger>'."""
         if part == "torso":

@@ -9,6 +9,8 @@ the graph: the four are planned at once, in parallel.
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -29,6 +31,13 @@ class MotionGraph:
         self.offline = np.ones(len(self.edges), dtype=bool)
         self.n_roadmap = len(self.q)
         self.index = {_key(u, v): k for k, (u, v) in enumerate(self.edges)}
+
+    def copy(self) -> "MotionGraph":
+        """An independent copy, cheap: the arrays are only ever replaced (never written in place), so they are shared;
+        the edge index is a new dict of the same immutable keys."""
+        out = copy.copy(self)
+        out.index = dict(self.index)
+        return out
 
     def add_nodes(self, q: np.ndarray) -> np.ndarray:
         q = np.atleast_2d(q)

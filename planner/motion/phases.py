@@ -20,7 +20,6 @@ part.
 """
 from __future__ import annotations
 
-import copy
 import dataclasses
 import time
 from collections.abc import Callable, Iterator
@@ -42,7 +41,7 @@ from .result import PHASES
 from .situation import Situation, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
-from .validity import Clearances, Profile, Validity, fits, fitted, make_validity
+from .validity import Clearances, Profile, Validity, far, fits, fitted, make_validity
 
 
 @dataclass(frozen=True)
@@ -187,7 +186,7 @@ class PhasePlanner:
     def clearances(self, model: CollisionModel, q: np.ndarray) -> dict[str, float]:
         """A situation's clearances at q over its moving pairs (see validity.Clearances), scratch data kept per model."""
         if id(model) not in self.distances:
-            self.distances[id(model)] = Clearances(model, "moving")
+            self.distances[id(model)] = Clearances(model, "moving", far(self.transit_profile))
         return self.distances[id(model)](q)
 
     def validity(self, model: CollisionModel, profile: Profile) -> Validity:
@@ -399,7 +398,7 @@ class PhasePlanner:
         def run(i: int) -> tuple[list[Piece] | tuple[int, str, str], TransitStats]:
             phase, job = jobs[i]
             kept = self.stats[phase]
-            self.rng, self.graph, self.stats[phase] = np.random.default_rng(seeds[i]), copy.deepcopy(graph), TransitStats()
+            self.rng, self.graph, self.stats[phase] = np.random.default_rng(seeds[i]), graph.copy(), TransitStats()
             try:
                 return job(), self.stats[phase]
             except PieceFailed as exc:

@@ -23,9 +23,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..collision import CollisionModel
+from ..collision import CollisionModel, joint_support
 from ..geometry import se3
-from ..roadmap.decomposition import relative_joints
 
 OBJECT = "object"
 
@@ -91,16 +90,16 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
     new_env = np.arange(n_pairs, n_pairs + len(env_partners))
     new_robot = np.arange(n_pairs + len(env_partners), len(gm.collisionPairs))
     moved = np.concatenate([finger_geometries(cm, arm) for arm in moved_hands] + [np.zeros(0, np.int64)])
-    first = np.array([cp.first for cp in gm.collisionPairs[:n_pairs]], dtype=int)
-    second = np.array([cp.second for cp in gm.collisionPairs[:n_pairs]], dtype=int)
-    hand_pairs = np.flatnonzero(np.isin(first, moved) | np.isin(second, moved))
+    hand_pairs = np.flatnonzero(np.isin(cm.ends, moved).any(axis=1))
     new = np.arange(n_pairs, len(gm.collisionPairs))
     subsets = {**cm.subsets,
                "all": np.concatenate([cm.subsets["all"], new]),
                "env": np.concatenate([cm.subsets["env"], new_env]),
                "object": new_robot}
-    out = dataclasses.replace(cm, geometry=gm, subsets=subsets)
-    changes = relative_joints(out)[:, moving].any(axis=1)
+    ends = np.concatenate([cm.ends, np.array([(g, o) for g in env_partners + robot_partners], np.int64).reshape(-1, 2)])
+    support = np.concatenate([cm.support, joint_support(robot.model, [gm.geometryObjects[o].parentJoint])])
+    out = dataclasses.replace(cm, geometry=gm, subsets=subsets, ends=ends, support=support)
+    changes = out.relative_joints()[:, moving].any(axis=1)
     subsets["moving"] = np.flatnonzero(changes)
     subsets["changed"] = np.concatenate([hand_pairs, new])[changes[np.concatenate([hand_pairs, new])]]
     return out

@@ -112,29 +112,55 @@ class Validity:
         return all(self.state_valid(q) for q in path) and all(self.motion_valid(a, b, ends=False) for a, b in zip(path[:-1], path[1:]))
 
 
+KINDS = ("env", "self", "object")
+
+
 class Clearances:
     """The smallest distance at a configuration of a subset's pairs with an obstacle ('env'), robot–object pairs
-    ('object') and robot–robot pairs ('self'), inf for a kind the subset lacks; scratch data built once per model."""
+    ('object') and robot–robot pairs ('self'); inf for a kind the subset lacks or whose pairs are all at least `far[kind]`
+    apart (what a profile cannot use: see `far`). Scratch data built once per model.
 
-    def __init__(self, cm: CollisionModel, subset: str):
+    Only pairs nearer than `far` are measured: a collision check with `far` as the security margin finds them (GJK stops
+    early on pairs far apart), then their exact distances are computed; measuring every pair cost ten times more."""
+
+    def __init__(self, cm: CollisionModel, subset: str, far: dict[str, float]):
         self.cm = cm
         self.data = cm.robot.model.createData()
         self.gd = pin.GeometryData(cm.geometry)
         self.pairs = np.asarray(cm.subsets[subset], dtype=np.int64)
-        active = np.zeros(len(cm.geometry.collisionPairs), dtype=bool)
-        active[self.pairs] = True
-        for k in np.flatnonzero(~active):
-            self.gd.deactivateCollisionPair(int(k))
-        kind = np.full(len(active), "self", dtype=object)
+        kind = np.full(len(cm.geometry.collisionPairs), "self", dtype=object)
         kind[cm.subsets["env"]] = "env"
         kind[cm.subsets.get("object", [])] = "object"
         self.kind = kind[self.pairs]
+        active = np.zeros(len(kind), dtype=bool)
+        active[self.pairs] = True
+        margin = np.zeros(len(kind))
+        for k in KINDS:
+            margin[kind == k] = far[k]
+        n = len(cm.geometry.geometryObjects)
+        table = np.zeros((n, n), dtype=bool)
+        table[cm.ends[:, 0], cm.ends[:, 1]] = table[cm.ends[:, 1], cm.ends[:, 0]] = active
+        margins = np.zeros((n, n))
+        margins[cm.ends[:, 0], cm.ends[:, 1]] = margins[cm.ends[:, 1], cm.ends[:, 0]] = margin
+        self.gd.setActiveCollisionPairs(cm.geometry, table, True)
+        self.gd.setSecurityMargins(cm.geometry, margins, True, False)
 
     def __call__(self, q: np.ndarray) -> dict[str, float]:
-        pin.computeDistances(self.cm.robot.model, self.data, self.cm.geometry, self.gd, q)
-        results = self.gd.distanceResults
-        distance = np.array([results[int(k)].min_distance for k in self.pairs])
-        return {k: float(distance[self.kind == k].min(initial=np.inf)) for k in ("env", "self", "object")}
+        model, gm, gd = self.cm.robot.model, self.cm.geometry, self.gd
+        pin.computeCollisions(model, self.data, gm, gd, q, False)
+        results = gd.collisionResults
+        near = [i for i, k in enumerate(self.pairs) if results[int(k)].isCollision()]
+        out = dict.fromkeys(KINDS, np.inf)
+        for i in near:
+            distance = pin.computeDistance(gm, gd, int(self.pairs[i])).min_distance
+            out[self.kind[i]] = min(out[self.kind[i]], float(distance))
+        return out
+
+
+def far(profile: Profile) -> dict[str, float]:
+    """Per kind of pair, a distance beyond which a clearance changes nothing for the profile (neither `fits` nor `fitted`
+    nor how free a transit end is): a little past padding / 0.9."""
+    return {k: 1.01 * getattr(profile, f"{k}_padding") / 0.9 for k in KINDS}
 
 
 def fits(profile: Profile, clearance: dict[str, float]) -> bool:

@@ -50,21 +50,6 @@ def decompose(robot: Robot) -> Decomposition:
     return Decomposition(arms, robot.torso_idx.copy(), {a: robot.arm_idx[a].copy() for a in arms}, robot.q_rest.copy())
 
 
-def relative_joints(cm: CollisionModel) -> np.ndarray:
-    """(n_pairs, nq) bool: the joints whose motion changes each pair's relative pose.
-
-    A joint above both geometries moves them rigidly together, so it is not one of them.
-    """
-    model = cm.robot.model
-    support = np.zeros((len(cm.geometry.geometryObjects), model.nq), dtype=bool)
-    for g, obj in enumerate(cm.geometry.geometryObjects):
-        for j in list(model.supports[obj.parentJoint])[1:]:
-            support[g, model.joints[j].idx_q] = True
-    first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
-    second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
-    return support[first] ^ support[second]
-
-
 def pair_subsets(cm: CollisionModel, dec: Decomposition) -> dict[str, np.ndarray]:
     """Pair indices (into cm.geometry.collisionPairs) for each roadmap check; see the module docstring.
 
@@ -74,9 +59,8 @@ def pair_subsets(cm: CollisionModel, dec: Decomposition) -> dict[str, np.ndarray
     part comes from the other arm's elementary node;
     'mixed': moving pairs not inside one arm — an SG edge whose common part switches source.
     """
-    first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
-    second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
-    moving = relative_joints(cm)[:, dec.transit].any(axis=1)
+    first, second = cm.ends[:, 0], cm.ends[:, 1]
+    moving = cm.relative_joints()[:, dec.transit].any(axis=1)
     n_env = len(cm.geometry.geometryObjects) - cm.n_robot_geoms
     group = np.array([p.removesuffix("_hand") for p in cm.parts] + ["env"] * n_env)
     ga, gb = group[first], group[second]

@@ -15,10 +15,8 @@ first) so that colliding segments fail early.
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 
 from ..collision import CollisionModel
-from .decomposition import relative_joints
 
 
 def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.ndarray:
@@ -33,11 +31,10 @@ def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.nd
     radii = np.zeros((len(cm.geometry.geometryObjects), model.nq))
     skip = 0 if known is None else len(known)
     radii[:skip] = known
-    axes = None
     for g, obj in enumerate(cm.geometry.geometryObjects):
         if g < skip or obj.parentJoint == 0:
             continue  # fixed in the world (obstacles, a static object): no joint moves it
-        axes = _axes(model) if axes is None else axes
+        axes = cm.robot.joint_axes
         geom = obj.geometry
         if hasattr(geom, "points"):
             pts = np.asarray(geom.points()) @ obj.placement.rotation.T + obj.placement.translation
@@ -54,16 +51,6 @@ def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.nd
             rest = sum(float(np.linalg.norm(t)) for t in offsets[1:])
             radii[g, model.joints[j].idx_q] = float(np.linalg.norm(across)) + rest + reach
     return radii
-
-
-def _axes(model: pin.Model) -> np.ndarray:
-    """(njoints, 3) each revolute joint's rotation axis in its own frame (row 0: the universe, unused)."""
-    data = model.createData()
-    pin.computeJointJacobians(model, data, pin.neutral(model))
-    axes = np.zeros((model.njoints, 3))
-    for j in range(1, model.njoints):
-        axes[j] = pin.getJointJacobian(model, data, j, pin.LOCAL)[3:, model.joints[j].idx_v]
-    return axes
 
 
 def van_der_corput(n: int) -> np.ndarray:
@@ -101,9 +88,7 @@ class SegmentChecker:
         self.cm = cm
         self.checker = cm.checker()
         radii = geometry_radii(cm) if radii is None else radii
-        first = np.array([cp.first for cp in cm.geometry.collisionPairs], dtype=int)
-        second = np.array([cp.second for cp in cm.geometry.collisionPairs], dtype=int)
-        sweep = relative_joints(cm) * (radii[first] + radii[second])
+        sweep = cm.relative_joints() * (radii[cm.ends[:, 0]] + radii[cm.ends[:, 1]])
         self._per_pair = sweep / (2.0 * allowances(cm, env_clearance, self_clearance, object_clearance))[:, None]
         self._weights: dict[str, np.ndarray] = {}
 
@@ -114,7 +99,10 @@ class SegmentChecker:
     def weights(self, subset: str) -> np.ndarray:
         """(rows, nq) the subset's displacement weights per joint (computed once per subset)."""
         if subset not in self._weights:
-            self._weights[subset] = np.unique(self._per_pair[self.cm.subsets[subset]], axis=0)
+            rows = np.ascontiguousarray(self._per_pair[self.cm.subsets[subset]])
+            # distinct rows, found by their bytes (np.unique(axis=0) sorts lexicographically: ten times slower)
+            _, first = np.unique(rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1]))).ravel(), return_index=True)
+            self._weights[subset] = rows[np.sort(first)]
         return self._weights[subset]
 
     def steps(self, qa: np.ndarray, qb: np.ndarray, subset: str) -> np.ndarray:
