@@ -19,9 +19,11 @@ from planner.roadmap import Roadmap, RoadmapParams, RoadmapPlanner, roadmap_for
 from planner.roadmap import build as roadmap_build
 from planner.roadmap.build import build_roadmap, roadmap_collision_model, segment_checker
 from planner.roadmap.local_planner import van_der_corput
+from planner.roadmap.step import session_roadmap_seed
 from planner.roadmap.super_graph import components
 
 SMALL = RoadmapParams(nodes=7, max_failures=100)
+SESSION_SEED = 3  # the seed of the session tests' plans (test_session.py)
 ORACLE_STEP = 0.01  # rad: the oracle's own resolution along an edge (largest joint change between two of its checks)
 
 
@@ -200,8 +202,9 @@ def test_roadmap_command_prints_the_table_and_writes_json(tmp_path, capsys, monk
 
 @pytest.mark.slow
 def test_default_super_graph_size(default_scene, oracle):
-    """Two elementary roadmaps of 50 nodes give >= 1,700 Super Graph nodes; a sample of edges re-checked by the oracle."""
-    roadmap = build_roadmap(default_scene, RoadmapParams(), seed=0)[0]
+    """Two elementary roadmaps of 50 nodes give >= 1,700 Super Graph nodes; a sample of edges re-checked by the oracle.
+    The roadmap of the session tests' seed: built here or by them, then taken from the shared test cache (one build)."""
+    roadmap = roadmap_for(default_scene, RoadmapParams(), session_roadmap_seed(SESSION_SEED))[0]
     stats = roadmap.stats()
     assert stats["elementary_nodes"] == {"right": 50, "left": 50}
     assert stats["nodes"] >= 1700
