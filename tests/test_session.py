@@ -224,7 +224,7 @@ def test_branch_keeps_the_original(planned, tmp_path):
     session = Session.open(folder)
     new = session.branch(tmp_path / "branch", before=PIPELINE[0].name)
     assert new.finished() == []
-    run_pipeline(new, params={"arms": {"seeds": 40}})
+    run_pipeline(new, "arms", params={"arms": {"seeds": 40}})
     assert new.record_of("arms")["params"]["seeds"] == 40
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
