@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 import pinocchio as pin
 
-from ..collision import CollisionModel
+from ..collision import CollisionModel, geometry_data
 from ..roadmap.local_planner import SegmentChecker, geometry_radii, van_der_corput
 
 
@@ -126,24 +126,13 @@ class Clearances:
     def __init__(self, cm: CollisionModel, subset: str, far: dict[str, float]):
         self.cm = cm
         self.data = cm.robot.model.createData()
-        self.gd = pin.GeometryData(cm.geometry)
         self.pairs = np.asarray(cm.subsets[subset], dtype=np.int64)
         kind = np.full(len(cm.geometry.collisionPairs), "self", dtype=object)
         kind[cm.subsets["env"]] = "env"
         kind[cm.subsets.get("object", [])] = "object"
         self.kind = kind[self.pairs]
-        active = np.zeros(len(kind), dtype=bool)
-        active[self.pairs] = True
-        margin = np.zeros(len(kind))
-        for k in KINDS:
-            margin[kind == k] = far[k]
-        n = len(cm.geometry.geometryObjects)
-        table = np.zeros((n, n), dtype=bool)
-        table[cm.ends[:, 0], cm.ends[:, 1]] = table[cm.ends[:, 1], cm.ends[:, 0]] = active
-        margins = np.zeros((n, n))
-        margins[cm.ends[:, 0], cm.ends[:, 1]] = margins[cm.ends[:, 1], cm.ends[:, 0]] = margin
-        self.gd.setActiveCollisionPairs(cm.geometry, table, True)
-        self.gd.setSecurityMargins(cm.geometry, margins, True, False)
+        margins = dataclasses.replace(cm.params, **{f"{k}_padding": far[k] for k in KINDS})
+        self.gd = geometry_data(dataclasses.replace(cm, params=margins), subset)
 
     def __call__(self, q: np.ndarray) -> dict[str, float]:
         model, gm, gd = self.cm.robot.model, self.cm.geometry, self.gd
