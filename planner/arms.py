@@ -5,9 +5,10 @@ pairs are possible (both arms reach a placement), the pair with the lower estima
 is chosen: the palms' travel of the paper's exchange cost (exchange_grid.py) with the witness
 configurations as grasp and place, at the exchange point minimising it (the geometric median of the
 four palm positions the exchange connects). When one arm reaches both placements no handover is
-needed: the step says so (the direct transfer, phases Grasp, Transfer, Rest, belongs to the motion
-step), unless the task asks for a handover (`handover = true`). Arms can be forced with the step's
-parameters; every failure message says how.
+needed: that arm both picks and places (a direct transfer: the later steps keep the grasps it can
+hold at both placements, and the motion carries the object with it), unless the task asks for a
+handover (`handover = true`). Arms can be forced with the step's parameters (the same arm twice: a
+direct transfer); every failure message says how.
 """
 from __future__ import annotations
 
@@ -42,7 +43,7 @@ class ArmAssignment:
     picking_arm: str
     placing_arm: str
     distances: dict  # placement -> arm -> best distance (m)
-    handover: bool  # false: one arm reaches both placements and the task did not ask for a handover
+    handover: bool  # false: one arm picks and places (it reaches both placements and the task did not ask for a handover)
     choice: str  # why these arms, in words
     costs: dict  # "picking>placing" -> estimated exchange cost (m), for every possible pair
     failure: str  # empty when the pipeline can go on
@@ -89,10 +90,12 @@ def _reached(reaches: dict[str, dict[str, ReachResult]], name: str) -> list[str]
 def forced_decision(scene: Scene, forced: tuple[str, str]) -> Decision:
     """The arms the step's parameters force, or a RegraspError when they are not two different arms of the robot."""
     names = scene.robot.spec.arm_names
-    if not all(a in names for a in forced) or forced[0] == forced[1]:
-        raise RegraspError(f"arms: picking_arm and placing_arm must be two different arms of the robot ({', '.join(names)}); "
-                           f"got '{forced[0]}' and '{forced[1]}'")
-    return Decision(*forced, True, "forced by the step's parameters", {}, "")
+    if not all(a in names for a in forced):
+        raise RegraspError(f"arms: picking_arm and placing_arm must be arms of the robot ({', '.join(names)}; the same one "
+                           f"twice for a direct transfer); got '{forced[0]}' and '{forced[1]}'")
+    direct = forced[0] == forced[1]
+    return Decision(*forced, not direct, "forced by the step's parameters" + (" (one arm: a direct transfer)" if direct else ""),
+                    {}, "")
 
 
 def decide(scene: Scene, reaches: dict[str, dict[str, ReachResult]], forced: tuple[str, str] = ("", "")) -> Decision:
@@ -106,11 +109,10 @@ def decide(scene: Scene, reaches: dict[str, dict[str, ReachResult]], forced: tup
     both = [a for a in initial if a in final]
     if both and not scene.handover:
         arm = both[0]
-        why = (f"no handover is needed: the {arm} arm reaches both placements; the direct transfer with that arm "
-               "(phases Grasp, Transfer, Rest) is the motion step's, so the regrasp steps stop here "
+        why = (f"no handover is needed: the {arm} arm reaches both placements and carries the object itself "
                "(set handover = true in the task to plan a regrasp anyway" + ("" if pairs else ", which needs "
                "the other arm to reach a placement") + f", or {FORCE_HINT})")
-        return Decision(arm, arm, False, why, costs, why)
+        return Decision(arm, arm, False, why, costs, "")
     if not pairs:
         reached = "; ".join(f"the {name} placement is reached by {', '.join(_reached(reaches, name)) or 'no arm'}"
                             for name in ("initial", "final"))

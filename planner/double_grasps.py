@@ -9,6 +9,9 @@ problem, scipy), its position is the best exchange node, then Gaussian samples a
 is sampled near rest and both arms are solved by IK; the object is tested against the environment
 and the robot against itself, the environment and the object. The first `count` pairs that get one
 are returned, best first.
+A direct transfer (one arm picks and places) pairs each grasp with itself: the grasps with a
+configuration at both placements, ranked the same way; the object never changes hands, so a row's
+exchange configuration is its place configuration and its exchange pose the final placement.
 """
 from __future__ import annotations
 
@@ -80,6 +83,14 @@ def compatible_pairs(robot, pick: GraspList, place: GraspList, pick_ranks: np.nd
                     np.int64).reshape(-1, 2)
 
 
+def same_grasps(pick: GraspList, place: GraspList, pick_ranks: np.ndarray, place_ranks: np.ndarray) -> np.ndarray:
+    """(n, 2) indices into pick_ranks / place_ranks of the same grasp (hand pose and fingers) in both lists: for a direct
+    transfer, the grasps the arm holds at both placements."""
+    return np.array([(i, j) for i, r in enumerate(pick_ranks) for j, s in enumerate(place_ranks)
+                     if np.array_equal(pick.hand_pose[r], place.hand_pose[s]) and np.array_equal(pick.finger_q[r], place.finger_q[s])],
+                    np.int64).reshape(-1, 2)
+
+
 def normalised(x: np.ndarray) -> np.ndarray:
     top = np.max(x) if len(x) else 0.0
     return x / top if top > 0 else np.ones_like(x)
@@ -131,8 +142,13 @@ def run(ctx: StepContext) -> StepOutput:
     log = StageLog()
     log.done("pairs with configurations", len(hp.rank) * len(hq.rank), f"{len(hp.rank)} pick x {len(hq.rank)} place grasps")
     ctx.progress(0.0, "hands on the object")
-    pairs = compatible_pairs(robot, pick, place, hp.rank, hq.rank, p.hand_margin)
-    log.done("compatible pairs", len(pairs), "hands apart on the object")
+    direct = a == b
+    if direct:
+        pairs = same_grasps(pick, place, hp.rank, hq.rank)
+        log.done("grasps held at both placements", len(pairs), f"a direct transfer: the {a} arm picks and places")
+    else:
+        pairs = compatible_pairs(robot, pick, place, hp.rank, hq.rank, p.hand_margin)
+        log.done("compatible pairs", len(pairs), "hands apart on the object")
     i, j = pairs[:, 0], pairs[:, 1]
     quality = normalised(np.minimum(pick.quality[hp.rank[i]], place.quality[hq.rank[j]]))
     config = normalised(np.minimum(hp.score[i], hq.score[j]))
@@ -143,8 +159,8 @@ def run(ctx: StepContext) -> StepOutput:
     sampler = ConfigSampler(robot, collision, ConfigScorer(robot, config_params.weights()), config_params)
     approach = {arm: approach_direction(robot, arm) for arm in (a, b)}
     shoulders = dict(zip(robot.spec.arm_names, np.asarray(exchange.shoulders)))
-    found, tried = [], 0
-    for k in order[: p.max_pairs]:
+    found, tried = [(k, hq.q[j[k]], scene.object_final) for k in order[: p.count]] if direct else [], 0
+    for k in [] if direct else order[: p.max_pairs]:
         if len(found) >= p.count or not len(exchange.best):
             break
         tried += 1
@@ -160,9 +176,13 @@ def run(ctx: StepContext) -> StepOutput:
         result = exchange_configuration(sampler, collision, hands, R, node, starts, p, ctx.rng)
         if result is not None:
             found.append((k, *result))
-    log.done("exchange configurations", len(found), f"of {tried} pairs tried, {p.attempts} samples each")
+    if not direct:
+        log.done("exchange configurations", len(found), f"of {tried} pairs tried, {p.attempts} samples each")
     failure = ""
-    if not len(pairs):
+    if direct and not len(pairs):
+        failure = log.failure(f"no grasp of the {a} hand has a configuration at both placements, which a direct transfer needs "
+                              "(set handover = true in the task to plan a regrasp with both hands)")
+    elif not len(pairs):
         failure = log.failure("no compatible pair: every pick grasp collides with every place grasp on the object")
     elif not found:
         failure = log.failure("no exchange configuration: no pair tried could be held by both hands at the exchange position")

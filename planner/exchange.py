@@ -6,6 +6,7 @@ sphere about its centre of mass, centred there, clears the environment and the r
 rest. Each node costs the palms' travel ig + ge + ef + ie + ep + pf (exchange_grid.py), the grasp
 and place palms taken from the best-scored grasp and place configurations; the cheapest free nodes
 are kept, best first. The exchange orientation depends on the double grasp (double_grasps.py).
+A direct transfer (one arm picks and places) has no exchange: the step records that, with no grid.
 """
 from __future__ import annotations
 
@@ -96,6 +97,11 @@ def run(ctx: StepContext) -> StepOutput:
     robot = scene.robot
     configs = ctx.inputs["grasp_configs"]
     log = StageLog()
+    if configs.picking_arm == configs.placing_arm:
+        log.done("no exchange", 0, f"a direct transfer: the {configs.picking_arm} arm picks and places")
+        none = np.zeros(0)
+        return StepOutput(Exchange(log.stages, "", p.step, [], [], 0, np.zeros((0, 3)), none, none.astype(bool), none.astype(np.int64),
+                                   np.zeros((6, 3))), tuple(log.seconds))
     pick, place = configs.hand("pick"), configs.hand("place")
     ctx.progress(0.0, "arm reach")
     reach = [arm_reach(robot, a, p.reach_samples, ctx.rng) for a in robot.spec.arm_names]

@@ -292,11 +292,16 @@ class PhasePlanner:
         oi, of = scene.object_initial, scene.object_final
         open_a, open_b = (self.open[self.robot.hand_idx[h.arm]] for h in (a, b))
 
-        # exact grasps, so the object's pose is continuous where it changes hands
+        # exact grasps, so the object's pose is continuous where it changes hands (a direct transfer: one hand holds it
+        # from the grasp to the placement)
+        direct = a.arm == b.arm
         g_a = np.linalg.inv(oi) @ self.palm(q_grasp, a.arm)
-        x = self.palm(q_exch, a.arm) @ np.linalg.inv(g_a)
-        q_exch = self.refine(q_exch, b.arm, x @ b.palm_in_object, a.arm, 1, "exchange")
-        g_b = np.linalg.inv(x) @ self.palm(q_exch, b.arm)
+        if direct:
+            g_b = g_a
+        else:
+            x = self.palm(q_exch, a.arm) @ np.linalg.inv(g_a)
+            q_exch = self.refine(q_exch, b.arm, x @ b.palm_in_object, a.arm, 1, "exchange")
+            g_b = np.linalg.inv(x) @ self.palm(q_exch, b.arm)
         q_place = self.refine(q_place, b.arm, of @ g_b, None, 2, "place")
         static_i, static_f = Situation(None, oi), Situation(None, of)
         held_a, held_b = Situation(a.arm, g_a), Situation(b.arm, g_b)
@@ -336,13 +341,6 @@ class PhasePlanner:
             self.ready(q_pre_b, held_a, 1, "exchange pre-grasp")
             return q_pre_b, out
 
-        exchanges = self.options(1, "exchange pre-grasp", self.shaped(b, self.retreats(q_x, b.arm, a.arm, False, 1, "exchange pre-grasp")),
-                                 exchange)
-        first_exchange = next(exchanges)
-        released = Situation(b.arm, g_b, tips_a)
-        q_both = self.with_fingers(q_x, b.arm, b.fingers)
-        let_go_a = self.fingers(1, "opening", q_both, a.arm, let_a, released)
-
         def leave(situation: Situation, after: Situation, phase: int, arm: str):
             def build(retreat: np.ndarray) -> list[Piece]:
                 piece = self.contact(phase, "retreat", retreat, situation, arm)
@@ -350,13 +348,21 @@ class PhasePlanner:
                 return [piece]
             return build
 
-        q_let = self.with_fingers(q_both, a.arm, let_a)
-        retreat_a = next(self.options(1, "retreat", self.retreats(q_let, a.arm, b.arm, False, 1, "retreat"),
-                                      leave(released, held_b, 1, a.arm)))
+        if not direct:  # the placing hand's exchange pre-grasp, approach and closing; the picking hand letting go
+            backoffs = self.retreats(q_x, b.arm, a.arm, False, 1, "exchange pre-grasp")
+            exchanges = self.options(1, "exchange pre-grasp", self.shaped(b, backoffs), exchange)
+            first_exchange = next(exchanges)
+            released = Situation(b.arm, g_b, tips_a)
+            q_both = self.with_fingers(q_x, b.arm, b.fingers)
+            let_go_a = self.fingers(1, "opening", q_both, a.arm, let_a, released)
+
+            q_let = self.with_fingers(q_both, a.arm, let_a)
+            retreat_a = next(self.options(1, "retreat", self.retreats(q_let, a.arm, b.arm, False, 1, "retreat"),
+                                          leave(released, held_b, 1, a.arm)))
 
         # Place: (above the placement, set-down) candidates; the picking hand keeps its fingers as they let go until the
-        # end (opened near the object, they hit it)
-        q_down = self.with_fingers(q_place, a.arm, let_a)
+        # end (opened near the object, they hit it); in a direct transfer it is the hand that holds the object
+        q_down = q_place if direct else self.with_fingers(q_place, a.arm, let_a)
 
         def set_down(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
             lower = self.straight(q_down, b.arm, offset, None, 2, "above the placement")[::-1]
@@ -382,11 +388,13 @@ class PhasePlanner:
             away = self.away(retreat_a[-1].path[-1], a.arm, q_place, held_b)
             return away + self.reach(2, (away or retreat_a)[-1].path[-1], downs, first_down, held_b)
 
+        to_grasp = (0, lambda: self.reach(0, scene.q_initial, grasps, first_grasp, static_i))
+        to_rest = (3, lambda: [self.transit(3, retreat_b[-1].path[-1], q_end, static_f)])
+        if direct:  # carried by the one hand from the lift to above the placement
+            to_grasp, carry, rest = self.transits([to_grasp, (1, lambda: self.reach(1, q_lifted, downs, first_down, held_a)), to_rest])
+            return to_grasp + lifted + carry + let_go_b + retreat_b + rest + opening
         to_grasp, carry, to_place, rest = self.transits([
-            (0, lambda: self.reach(0, scene.q_initial, grasps, first_grasp, static_i)),
-            (1, lambda: self.reach(1, q_lifted, exchanges, first_exchange, held_a)),
-            (2, place),
-            (3, lambda: [self.transit(3, retreat_b[-1].path[-1], q_end, static_f)])])
+            to_grasp, (1, lambda: self.reach(1, q_lifted, exchanges, first_exchange, held_a)), (2, place), to_rest])
         return to_grasp + lifted + carry + let_go_a + retreat_a + to_place + let_go_b + retreat_b + rest + opening
 
     def transits(self, jobs: list[tuple[int, Callable[[], list[Piece]]]]) -> list[list[Piece]]:

@@ -47,8 +47,9 @@ class MotionParams:
 class Motion:
     """A trajectory sampled at `rate`: time, configuration, phase (0..3: Grasp, Carry, Place, Rest), the object's world
     pose, which arm holds it (-1: none) and which arm's hand works at the object (-1: none), each wrist's position;
-    `keyframes` are the samples at q_initial, q_grasp, q_exch, q_place and q_final. `phases` holds Table I's counts per
-    phase (seconds are in the session record)."""
+    `keyframes` are the samples at q_initial, q_grasp, q_exch, q_place and q_final (a direct transfer, one arm carrying
+    the object, has no exchange: Carry takes it to above the placement, and its q_exch keyframe is q_place's). `phases`
+    holds Table I's counts per phase (seconds are in the session record)."""
 
     planner: str
     double_grasp: int  # rank of the double grasp used (-1 when none worked)

@@ -112,8 +112,9 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
     wrists.insert(0, [data.oMf[m].translation.copy() for m in mounts])
     q = np.concatenate(qs)
     phase_arr = np.array(phase, np.int8)
-    key = [0] + [ends[i] for i, pc in enumerate(pieces) if (pc.phase, pc.part) in ((0, "closing"), (1, "closing"), (2, "set-down"))][:3]
-    key.append(len(q) - 1)
+    grasped, exchanged, placed = (next((ends[i] for i, pc in enumerate(pieces) if (pc.phase, pc.part) == mark), None)
+                                  for mark in ((0, "closing"), (1, "closing"), (2, "set-down")))
+    key = [0, grasped, placed if exchanged is None else exchanged, placed, len(q) - 1]  # a direct transfer: no exchange
     t = np.arange(len(q)) * dt
     table = []
     for i, st in enumerate(planner.stats):

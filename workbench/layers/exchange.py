@@ -69,10 +69,11 @@ class ExchangeLayer(StepLayer):
         self.folder = self.server.gui.add_folder("Exchange position", expand_by_default=False)
         with self.folder:
             where = f"at ({', '.join(f'{v:.2f}' for v in result.position)}) m" if len(result.best) else "none"
-            self.server.gui.add_markdown(
-                f"{len(result.nodes)} nodes both hands reach ({result.step:g} m grid), {int(result.free.sum())} free; "
-                f"yellow = cheap, purple = expensive. Best exchange position (pink) {where}.\n\n"
-                + stages_markdown(result.stages, result.failure))
+            grid = (f"{len(result.nodes)} nodes both hands reach ({result.step:g} m grid), {int(result.free.sum())} free; "
+                    f"yellow = cheap, purple = expensive. Best exchange position (pink) {where}.")
+            direct = not result.shoulders and not result.failure  # no grid was made: one arm picks and places
+            self.server.gui.add_markdown(("No exchange: one arm carries the object itself." if direct else grid) + "\n\n"
+                                         + stages_markdown(result.stages, result.failure))
             self.shown = self.server.gui.add_slider("Cheapest nodes (%)", min=1, max=100, step=1, initial_value=SHOWN_PERCENT,
                                                     hint="The share of the free nodes drawn, cheapest first")
         self.shown.on_update(lambda e: self.show_cheapest(e.target.value))
