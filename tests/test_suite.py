@@ -5,20 +5,26 @@ The suites run `--until place_grasps`: the arms step and both grasp lists of the
 the other end-to-end tests have already cached (the whole pipeline per task would take minutes here)."""
 from __future__ import annotations
 
+import io
 import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+from PIL import Image
 
 from planner.check import check_task
 from planner.errors import InputError
 from planner.suite.generate import generate_tasks
 from planner.suite.spec import load_suite
 from planner.task import load_task
+from planner.user_cache import computing
 from workbench.cli import main
+from workbench.suite_report import write_report
 
 UNTIL = "place_grasps"
 # four statuettes near the default task's placements (the right arm picks, the left places), at other positions and headings
@@ -83,17 +89,17 @@ def test_default_suite_has_fifty_tasks_and_six_objects():
     assert "statuette" in [o.builtin for o in spec.objects] and sum(not o.builtin for o in spec.objects) >= 5
 
 
-def test_generation_is_deterministic_and_every_task_passes_check(suite_file, tmp_path):
-    spec = load_suite(suite_file)
-    one, two = generate_tasks(spec, tmp_path / "a", workers=2), generate_tasks(spec, tmp_path / "b", workers=1)
-    assert one == two and [t.id for t in one] == ["0001-statuette", "0002-statuette", "0003-statuette", "0004-statuette"]
-    assert len({t.initial for t in one}) == 4  # four different tasks
-    for name in sorted(p.name for p in (tmp_path / "a").iterdir()):
-        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
-    for task in one:
+def test_generation_is_deterministic_and_every_task_passes_check(local_run, suite_file, tmp_path):
+    tasks = generate_tasks(load_suite(suite_file), tmp_path, workers=1)  # the suite drew them on two workers
+    assert [t.id for t in tasks] == ["0001-statuette", "0002-statuette", "0003-statuette", "0004-statuette"]
+    assert len({t.initial for t in tasks}) == 4  # four different tasks
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in (local_run / "tasks").iterdir())
+    for path in tmp_path.iterdir():
+        assert path.read_bytes() == (local_run / "tasks" / path.name).read_bytes(), path.name
+    for task in tasks:
         x, y, _, yaw = task.initial
         assert 0.43 <= x <= 0.50 and -0.87 <= y <= -0.80 and 0.8 <= yaw <= 1.6
-        report = check_task(load_task(tmp_path / "a" / task.files[0]))
+        report = check_task(load_task(local_run / "tasks" / task.files[0]))
         assert report.ok and report.handover, report.render()
 
 
@@ -106,27 +112,48 @@ def test_a_region_that_yields_no_valid_task_is_named(tmp_path):
     assert err.value.field == "final_regions[0]" and "'in_vase'" in str(err.value) and "penetrates vase" in str(err.value)
 
 
-def test_bad_suite_fields_are_named_before_any_folder_is_made(tmp_path):
+def test_bad_suite_fields_are_named_before_any_folder_is_made(tmp_path, capsys):
     cases = [("tasks = 4", "tasks = 0", "'tasks': expected an integer from 1"),
-             ('shape = "box"', 'shape = "box"', ""),
              ('mesh = "statuette"', 'shape = "cube"', "'objects[0].shape': expected one of box, cylinder"),
-             ("yaw = [0.8, 1.6]", "yaw = [1.6, 0.8]", "'initial_regions[0].yaw': expected [low, high] with low <= high")]
+             ('mesh = "statuette"', 'shape = "box"\nsize = [0.5, 0.1, 0.1]', "'objects[0].shape': the box is 0.5 m long"),
+             ("yaw = [0.8, 1.6]", "yaw = [1.6, 0.8]", "'initial_regions[0].yaw': expected [low, high] with low <= high"),
+             ('name = "right"', 'name = "right/../x"', "'initial_regions[0].name': expected letters, digits")]
     for old, new, expected in cases:
-        if not expected:
-            continue
         path = tmp_path / "bad.toml"
         path.write_text(SUITE.replace(old, new))
-        run = regrasp("suite", str(path), "--out", str(tmp_path / "out"))
-        assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
-        assert f"{path}, field {expected}" in run.stderr, run.stderr
+        assert main(["suite", str(path), "--out", str(tmp_path / "out")]) == 2
+        assert f"{path}, field {expected}" in capsys.readouterr().err
         assert not (tmp_path / "out").exists()
 
 
-def test_an_existing_suite_is_kept_without_resume_or_force(local_run, suite_file):
+def test_an_existing_suite_is_kept_without_resume_or_force(local_run, suite_file, capsys):
     before = (local_run / "suite.json").read_bytes()
-    run = regrasp("suite", str(suite_file), "--out", str(local_run), "--until", UNTIL)
-    assert run.returncode == 2 and "already holds a suite; use --resume" in run.stderr
+    assert main(["suite", str(suite_file), "--out", str(local_run), "--until", UNTIL]) == 2
+    assert "already holds a suite; use --resume to continue it, or --force to replace it" in capsys.readouterr().err
     assert (local_run / "suite.json").read_bytes() == before
+
+
+def test_a_cache_entry_is_computed_by_one_process_at_a_time(tmp_path):
+    entry, log = tmp_path / "entry", tmp_path / "log"
+
+    def compute() -> None:
+        with computing(entry):
+            with log.open("a") as f:
+                f.write(f"start {time.monotonic()}\n")
+            time.sleep(0.3)
+            with log.open("a") as f:
+                f.write(f"end {time.monotonic()}\n")
+
+    pids = []
+    for _ in range(2):
+        pid = os.fork()
+        if pid == 0:
+            compute()
+            os._exit(0)
+        pids.append(pid)
+    assert all(os.waitpid(pid, 0)[1] == 0 for pid in pids)
+    marks = [line.split()[0] for line in log.read_text().splitlines()]
+    assert marks == ["start", "end", "start", "end"]  # never two starts in a row: the second waited for the first
 
 
 def test_suite_records_every_task(local_run):
@@ -170,3 +197,41 @@ def test_a_killed_suite_resumes_without_redoing_finished_tasks(local_run, suite_
     assert "2 of 4 tasks finished, 2 to run" in resumed.stderr and "0001-statuette" not in resumed.stderr
     assert {p.name: p.stat().st_mtime_ns for p in done} == stamps
     assert results(out) == results(local_run)
+
+
+def _pixels(element, rgb: tuple[int, int, int]) -> int:
+    """How many pixels of an element's screenshot have (nearly) this colour."""
+    image = np.asarray(Image.open(io.BytesIO(element.screenshot())).convert("RGB"), dtype=np.int16)
+    return int((np.abs(image - np.array(rgb)).max(axis=2) < 30).sum())
+
+
+@pytest.mark.browser
+def test_the_report_opens_in_chromium_and_shows_its_plots(local_run, suite_file, browser, tmp_path):
+    data = json.loads((local_run / "suite.json").read_text())
+    failed = data["results"][1] | {"success": False, "failed_step": "grasp_configs", "failed_stage": "pick grasps with a configuration",
+                                   "message": "no collision-free pick grasp"}
+    data |= {"results": [data["results"][0], failed, *data["results"][2:]], "by_stage": {"grasp_configs: pick grasps": 1}}
+    spec = load_suite(suite_file)
+    write_report(data, spec, load_task(spec.base_task).environment, tmp_path)
+    page = browser.new_page(viewport={"width": 1200, "height": 900})
+    try:
+        for folder, failures in ((local_run, 0), (tmp_path, 1)):
+            page.goto((folder / "report.html").as_uri())
+            plots = page.locator("figure.plot svg")
+            assert plots.count() == 5 - (failures == 0)  # no failure: the failures plot says so instead
+            for i in range(plots.count()):
+                box = plots.nth(i).bounding_box()
+                assert box and box["width"] > 100 and box["height"] > 20
+            top = page.locator("figure.top-view svg")
+            assert top.locator("circle.placement").count() == top.locator("rect.placement").count() == 4
+            assert _pixels(top, (0x2A, 0x9D, 0x4A)) > 100  # the succeeded tasks' placements, drawn in green
+            assert (_pixels(top, (0xD1, 0x49, 0x5B)) > 20) == bool(failures)
+            assert _pixels(page.locator("figure.objects svg"), (0x2A, 0x9D, 0x4A)) > 100
+            replay = page.locator("tr.failed code")
+            assert replay.count() == failures
+            if failures:
+                assert replay.inner_text() == f"regrasp replay {tmp_path}/sessions/0002-statuette"
+                assert page.locator("tr.failed a.replay").get_attribute("href") == "sessions/0002-statuette/"
+                assert page.locator("#success-rate").inner_text() == "100.0%"  # the totals are the data's, as given
+    finally:
+        page.close()
