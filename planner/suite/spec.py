@@ -23,7 +23,6 @@ yaw = [-3.14, 3.14]
 """
 from __future__ import annotations
 
-import difflib
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +32,7 @@ import numpy as np
 
 from ..errors import InputError, RegraspError
 from ..object_mesh import UP_AXES, MeshOptions
-from ..paths import ASSETS
+from ..paths import ASSETS, named_file
 from ..shapes import SHAPES, generate, obj_text
 from ..task import BUILTIN_OBJECTS, MAX_COORDINATE, find_task
 from ..tomlread import Table, load_toml
@@ -90,23 +89,9 @@ class SuiteSpec:
     final_regions: tuple[Region, ...]
 
 
-def suite_names() -> list[str]:
-    """The names of the suites in assets/suites/."""
-    return sorted(p.stem for p in SUITES_DIR.glob("*.toml"))
-
-
 def find_suite(text: str | Path) -> Path:
-    """The suite file `text` names: an existing file, else a name in assets/suites/ (closest name suggested otherwise)."""
-    path = Path(text)
-    if path.is_file():
-        return path
-    names = suite_names()
-    stem = path.name.removesuffix(".toml")
-    if path.parent == Path(".") and stem in names:
-        return SUITES_DIR / f"{stem}.toml"
-    close = difflib.get_close_matches(stem, names, n=1)
-    hint = f"did you mean '{close[0]}'? " if close else ""
-    raise InputError(path, None, f"file not found, nor a suite name in assets/suites/ ({hint}suites: {', '.join(names) or 'none'})")
+    """The suite file `text` names: an existing file, else a name in assets/suites/ (see `named_file`)."""
+    return named_file(text, SUITES_DIR, "suite")
 
 
 def _name(tab: Table, seen: set[str]) -> str:
