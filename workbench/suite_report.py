@@ -152,6 +152,7 @@ def report_html(data: dict[str, Any], spec: SuiteSpec, environment: Environment,
 <h2>Where the objects were placed</h2><div class="plots">{_top_view(environment, (*spec.initial_regions, *spec.final_regions), results)}
 {_success_bars("Success per placement region", regions, "regions")}</div>
 <h2>Success per object</h2><div class="plots">{_success_bars("Success per object", data["by_object"], "objects")}</div>
+<p>{"; ".join(f"<b>{_e(o.name)}</b>: {_e(o.description)}" for o in spec.objects)}</p>
 <h2>Failures and time</h2><div class="plots">{_bars("Failures per step and stage", failures, cls="failures")}
 {_bars("Seconds per step: median (bar) and p95 (mark)", seconds, cls="seconds")}</div>
 <h2>Tasks</h2><p>Each task's session is in <code>sessions/</code>; open one with the command beside it.</p>{_task_rows(results, folder)}

@@ -4,6 +4,7 @@ from __future__ import annotations
 import concurrent.futures
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from types import ModuleType
 
 from ..errors import RegraspError
 from ..forked import worker_pool
@@ -37,7 +38,8 @@ class RayExecutor:
 
     address: str
 
-    def _ray(self):  # noqa: ANN202 - the ray module, imported only when asked for
+    def _ray(self) -> ModuleType:
+        """The ray module (imported only when asked for: Ray is an optional extra)."""
         try:
             import ray
         except ImportError as exc:

@@ -61,6 +61,9 @@ def _prepare(folder: Path, spec: SuiteSpec, until: str | None, resume: bool, for
                 shutil.rmtree(folder / name, ignore_errors=True)
             for name in (MANIFEST, *OUTPUTS):
                 (folder / name).unlink(missing_ok=True)
+    elif resume and folder.is_dir() and {p.name for p in folder.iterdir()} <= {"tasks"}:
+        with writing(folder):  # killed while drawing its tasks: they are drawn again
+            shutil.rmtree(folder / "tasks", ignore_errors=True)
     elif folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
         raise RegraspError(f"{folder} exists and is not an empty folder (and holds no suite): choose another folder")
     with writing(folder):
