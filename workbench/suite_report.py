@@ -32,11 +32,17 @@ def _e(value: Any) -> str:
     return html.escape(str(value))
 
 
-def _bars(title: str, rows: list[tuple[str, float, float, str]], unit: str = "", width: int = 460, cls: str = "") -> str:
+def _margins(labels: Iterable[str], notes: Iterable[str]) -> tuple[int, int]:
+    """(the width left of the bars, the width right of them) that fit the labels and the notes (6.5 px a character)."""
+    return 12 + int(6.5 * max(map(len, labels), default=0)), 12 + int(6.5 * max(map(len, notes), default=0))
+
+
+def _bars(title: str, rows: list[tuple[str, float, float, str]], unit: str = "", cls: str = "") -> str:
     """A horizontal bar chart: (label, value, a mark at this value or 0 for none, text after the bar) per row."""
     if not rows:
         return f'<figure class="plot {cls}"><figcaption>{_e(title)}: nothing to show</figcaption></figure>'
-    left, bar_w, row_h = 150, width - 230, 20
+    (left, right), bar_w, row_h = _margins((r[0] for r in rows), (r[3] for r in rows)), 240, 20
+    width = left + bar_w + right
     top = max(max(v, w) for _, v, w, _ in rows) or 1.0
     parts = []
     for i, (label, value, whisker, note) in enumerate(rows):
@@ -52,9 +58,10 @@ def _bars(title: str, rows: list[tuple[str, float, float, str]], unit: str = "",
             f'<title>{_e(title)}</title>{"".join(parts)}</svg><figcaption>{_e(title)}{_e(unit)}</figcaption></figure>')
 
 
-def _success_bars(title: str, rates: dict[str, dict[str, Any]], cls: str, width: int = 460) -> str:
+def _success_bars(title: str, rates: dict[str, dict[str, Any]], cls: str) -> str:
     """Per key, a bar split into succeeded (green) and failed (red) tasks, with 'k/n'."""
-    left, bar_w, row_h = 150, width - 230, 20
+    (left, right), bar_w, row_h = _margins(rates, ["100/100 (100%)"]), 240, 20
+    width = left + bar_w + right
     most = max((r["tasks"] for r in rates.values()), default=1)
     parts = []
     for i, (name, r) in enumerate(rates.items()):
@@ -80,7 +87,7 @@ def _footprints(environment: Environment) -> list[tuple[str, np.ndarray, tuple[i
     return [(name, xy, color) for name, xy, color, _ in sorted(out, key=lambda o: o[3])]
 
 
-def _top_view(environment: Environment, regions: Iterable[Region], results: list[dict[str, Any]], size: int = 520) -> str:
+def _top_view(environment: Environment, regions: Iterable[Region], results: list[dict[str, Any]], size: int = 760) -> str:
     """The desk from above (the robot at the bottom facing up, its right hand on the right): obstacles, regions, placements."""
     feet = _footprints(environment)
     placements = np.array([r[k][:2] for r in results for k in ("initial", "final")] or [[0.0, 0.0]])
