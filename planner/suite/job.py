@@ -74,7 +74,7 @@ def _outcome(job: TaskJob, session: Session | None, failure: tuple[str, str] | N
     records = {r["name"]: r["stats"] for r in session.records} if session else {}
     step, message = failure or ("", "")
     stage = _failed_stage(session, step) if session and step in records else ""
-    motion = records.get("motion", {})
+    motion = records.get("motion", {}) if step != "motion" else {}  # a failed motion has no duration nor length
     return TaskOutcome(job.id, failure is None, step, stage, message, tuple(records),
                        records.get("double_grasps", {}).get("double_grasps"), motion.get("duration"), motion.get("path_length"))
 
