@@ -124,6 +124,12 @@ def test_bad_suite_fields_are_named_before_any_folder_is_made(tmp_path, capsys):
         assert main(["suite", str(path), "--out", str(tmp_path / "out")]) == 2
         assert f"{path}, field {expected}" in capsys.readouterr().err
         assert not (tmp_path / "out").exists()
+    assert main(["suite", str(path), "--out", str(tmp_path / "out"), "--until", "motions"]) == 2
+    assert "no step 'motions'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["suite", str(path), "--out", str(tmp_path / "out"), "--workers", "0"])
+    assert "--workers: expected a whole number of at least 1" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
 
 
 def test_an_existing_suite_is_kept_without_resume_or_force(local_run, suite_file, capsys):

@@ -174,6 +174,17 @@ def _cmd_suite(args: argparse.Namespace) -> int:
     return 0
 
 
+def positive_int(text: str) -> int:
+    """argparse type of a count: an integer of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at least 1, got '{text}'")
+    return value
+
+
 def suite_argument(text: str) -> Path:
     """argparse type of SUITE: a suite file, or a name in assets/suites/."""
     from planner.suite.spec import find_suite
@@ -378,7 +389,7 @@ def parser() -> argparse.ArgumentParser:
     su.add_argument("suite", type=suite_argument, metavar="SUITE", help="a suite file, or the name of one in assets/suites/ (e.g. default)")
     su.add_argument("--out", required=True, metavar="DIR", help="folder to write the suite's tasks, sessions and report into")
     where = su.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: the number of CPUs)")
+    where.add_argument("--workers", type=positive_int, metavar="N", help="local worker processes (default: the number of CPUs)")
     where.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
                        help="run the tasks as Ray tasks: on the cluster at ADDRESS, or on a local Ray when none is given "
                             "(needs pip install 'regrasp[cluster]')")
