@@ -81,7 +81,7 @@ def _base(spec: SuiteSpec) -> Base:
     files = {robot.source.name: robot.text().encode()}
     data["robot"] = robot.source.name
     for k, obstacle in enumerate(data.get("obstacles", [])):
-        if "mesh" in obstacle:
+        if "mesh" in obstacle and obstacle["mesh"] not in BUILTIN_OBJECTS:
             found = next(p for p in (spec.base_task.parent / obstacle["mesh"], ASSETS / "objects" / obstacle["mesh"]) if p.is_file())
             obstacle["mesh"] = f"obstacle{k}-{found.name}"
             files[obstacle["mesh"]] = found.read_bytes()
