@@ -21,7 +21,7 @@ from ..errors import InputError
 from ..forked import forked_map
 from ..geometry import pose
 from ..object_mesh import MeshOptions, load_object_mesh
-from ..paths import ASSETS
+from ..paths import ASSETS, plain_name
 from ..results import atomic_write_bytes, atomic_write_text, writing
 from ..session import cached_spec_file
 from ..task import BUILTIN_OBJECTS, Scene, load_task, scene_from_dict
@@ -186,12 +186,14 @@ def generate_tasks(spec: SuiteSpec, folder: Path, workers: int = 1) -> list[Gene
 
 def load_generated(folder: Path, spec: SuiteSpec, tasks: list[dict[str, Any]]) -> list[GeneratedTask]:
     """The tasks a suite folder's manifest lists, each checked to name its task file (what a resumed suite runs)."""
+    manifest = folder.parent / "suite-run.json"
     out = []
     for i, t in enumerate(tasks):
+        files = tuple(plain_name(f, manifest, f"tasks[{i}].files[{k}]") for k, f in enumerate(t["files"]))
         task = GeneratedTask(t["id"], int(t["index"]), t["object"], t["initial_region"], t["final_region"],
-                             tuple(t["initial"]), tuple(t["final"]), tuple(t["files"]))
-        if task.id != task_id(spec, i) or not (folder / task.files[0]).is_file():
-            raise InputError(folder.parent / "suite-run.json", f"tasks[{i}]", f"expected task {task_id(spec, i)} with its file in {folder}")
+                             tuple(t["initial"]), tuple(t["final"]), files)
+        if task.id != task_id(spec, i) or task.index != i or not files or not (folder / files[0]).is_file():
+            raise InputError(manifest, f"tasks[{i}]", f"expected task {task_id(spec, i)} with its file in {folder}")
         load_toml(folder / task.files[0])
         out.append(task)
     return out

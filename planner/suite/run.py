@@ -32,6 +32,8 @@ KILL_AFTER = "REGRASP_SUITE_KILL_AFTER"  # test hook: the number of recorded tas
 
 
 class Executor(Protocol):
+    """Runs jobs somewhere (executors.py), handing back each result in this process as it arrives."""
+
     def run(self, jobs: Sequence[TaskJob], on_result: Callable[[JobResult], None], on_slots: Callable[[int], None]) -> None: ...
 
 
