@@ -65,9 +65,12 @@ class JobResult:
 
 
 def _failed_stage(session: Session, step: str) -> str:
-    """The first stage of a failed step's result that kept nothing ('' when the step has no stages)."""
-    stages = getattr(session.result(step), "stages", None) or []
-    return next((s["stage"] for s in stages if s["count"] == 0), "")
+    """The first stage of a failed step's result that kept nothing; for the motion, where its best double grasp failed
+    (e.g. 'Place phase, set-down'); '' when the step tells neither."""
+    result = session.result(step)
+    emptied = next((s["stage"] for s in getattr(result, "stages", None) or [] if s["count"] == 0), "")
+    tried = getattr(result, "tried", None) or [""]
+    return emptied or tried[0].partition(":")[0]
 
 
 def _outcome(job: TaskJob, session: Session | None, failure: tuple[str, str] | None) -> TaskOutcome:
