@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,9 @@ from planner.check import check_task
 from planner.errors import InputError
 from planner.suite.generate import generate_tasks
 from planner.suite.spec import load_suite
-from planner.task import load_task
+from planner.suite.toml_text import toml_text
+from planner.task import find_task, load_task
+from planner.tomlread import load_toml
 from planner.user_cache import computing
 from workbench.cli import main
 from workbench.suite_report import write_report
@@ -87,6 +90,12 @@ def test_default_suite_has_fifty_tasks_and_six_objects():
     spec = load_suite("default")
     assert spec.tasks >= 50 and len(spec.objects) >= 6 and spec.base_task.name == "default.toml"
     assert "statuette" in [o.builtin for o in spec.objects] and sum(not o.builtin for o in spec.objects) >= 5
+
+
+def test_task_files_are_written_as_they_were_read():
+    for name in ("default", "baxter"):
+        data = load_toml(find_task(name))
+        assert tomllib.loads(toml_text(data)) == data
 
 
 def test_generation_is_deterministic_and_every_task_passes_check(local_run, suite_file, tmp_path):
