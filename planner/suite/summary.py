@@ -1,7 +1,7 @@
 """A suite's totals: success rate, failures by step and stage, per-step seconds, per object and region; JSON and CSV.
 
 `results` (per task, in task order) depend only on the suite and its seeds; measured times are kept apart
-(`timings`, `seconds`, `wall_seconds`)."""
+(`timings`, `seconds`, and `wall_seconds`: the last run's, from its start to its end, a resumed suite's from its resume)."""
 from __future__ import annotations
 
 import csv
