@@ -28,7 +28,7 @@ from .object_model import ObjectModel, mesh_bytes, object_model
 from .results import array, load_result, read_only, save_result, writing
 from .robot_spec import HandSpec, RobotSpec
 from .steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
-from .user_cache import cache_key, cache_path, read_cached
+from .user_cache import cache_key, cache_path, computing, read_cached
 
 CODE_VERSION = "grasps-2"  # 2: no seconds in the list
 CHUNKS_PER_WORKER = 6
@@ -234,15 +234,16 @@ def grasp_list(spec: RobotSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams,
     hand = hand_spec_of(spec, arm)
     key = cache_key(CODE_VERSION, repr(hand), hand.urdf.read_bytes(), mesh_bytes(mesh), repr(p), str(seed), arm)
     folder = cache_path("grasps", key)
-    if use_cache:
-        cached = read_cached([folder / "grasps.json", folder / "grasps.npz"], lambda: load_result(GraspList, folder, "grasps"),
-                             f"grasp list of the {arm} hand")
-        if cached is not None:
-            return cached, True
-    result = compute_grasp_list(hand, arm, mesh, p, seed, progress, workers)
-    with writing(folder):
-        folder.mkdir(parents=True, exist_ok=True)
-    save_result(result, folder, "grasps")
+    with computing(folder):
+        if use_cache:
+            cached = read_cached([folder / "grasps.json", folder / "grasps.npz"], lambda: load_result(GraspList, folder, "grasps"),
+                                 f"grasp list of the {arm} hand")
+            if cached is not None:
+                return cached, True
+        result = compute_grasp_list(hand, arm, mesh, p, seed, progress, workers)
+        with writing(folder):
+            folder.mkdir(parents=True, exist_ok=True)
+        save_result(result, folder, "grasps")
     return read_only(result), False
 
 

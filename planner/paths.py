@@ -1,6 +1,7 @@
 """Where regrasp finds its assets, the robot descriptions of example-robot-data, and its cache."""
 from __future__ import annotations
 
+import difflib
 import functools
 import importlib.metadata
 import os
@@ -69,3 +70,20 @@ def plain_name(value: object, source: str | Path, field: str) -> str:
 def file_in(folder: Path, value: object, source: str | Path, field: str) -> Path:
     """`folder / value` for a name read from `source` (field `field`), refused unless it is a plain file name."""
     return folder / plain_name(value, source, field)
+
+
+def named_file(text: str | Path, folder: Path, what: str) -> Path:
+    """The file `text` names: an existing file, else a name in `folder` (with or without `.toml`), e.g. a task in assets/tasks/.
+
+    An unknown one is an InputError listing the names there are, with the closest as "did you mean"."""
+    path = Path(text)
+    if path.is_file():
+        return path
+    names = sorted(p.stem for p in folder.glob("*.toml"))
+    stem = path.name.removesuffix(".toml")
+    if path.parent == Path(".") and stem in names:
+        return folder / f"{stem}.toml"
+    close = difflib.get_close_matches(stem, names, n=1)
+    hint = f"did you mean '{close[0]}'? " if close else ""
+    where = folder.relative_to(PROJECT_ROOT) if folder.is_relative_to(PROJECT_ROOT) else folder
+    raise InputError(path, None, f"file not found, nor a {what} name in {where}/ ({hint}{what}s: {', '.join(names) or 'none'})")

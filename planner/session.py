@@ -93,7 +93,7 @@ def _load_meshes(folder: Path) -> dict[str, trimesh.Trimesh]:
     return out
 
 
-def _spec_file(text: str, name: str, manifest: Path) -> Path:
+def cached_spec_file(text: str, name: str, manifest: Path) -> Path:
     """The embedded robot spec written to the user cache (content-addressed), to load it from there."""
     folder = cache_dir() / "specs" / hashlib.sha256(text.encode()).hexdigest()[:16]
     path = file_in(folder, name, manifest, "robot_spec_name")
@@ -303,7 +303,7 @@ class Session:
         path = regular_file(folder / MANIFEST, "no session here (session.json is missing)")
         manifest = read_json_object(path)
         check_manifest(manifest, path)
-        spec = _spec_file(manifest["robot_spec"], manifest["robot_spec_name"], path)
+        spec = cached_spec_file(manifest["robot_spec"], manifest["robot_spec_name"], path)
         try:
             load_robot(spec)
         except RegraspError as exc:

@@ -6,7 +6,6 @@ object mesh, its initial/final poses and the robot's initial/final configuration
 from __future__ import annotations
 
 import copy
-import difflib
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +25,7 @@ from .object_mesh import (
     SizeLimits,
     load_mesh,
 )
-from .paths import ASSETS, TASKS_DIR
+from .paths import ASSETS, TASKS_DIR, named_file
 from .robot import Robot, load_robot
 from .tomlread import Table, load_toml
 
@@ -195,25 +194,9 @@ def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None 
     )
 
 
-def task_names() -> list[str]:
-    """The names of the tasks in assets/tasks/ (what a TASK argument may say instead of a file)."""
-    return sorted(p.stem for p in TASKS_DIR.glob("*.toml"))
-
-
 def find_task(text: str | Path) -> Path:
-    """The task file `text` names: an existing file, else a name in assets/tasks/ (with or without `.toml`).
-
-    An unknown one is an InputError listing the names there are, with the closest as "did you mean"."""
-    path = Path(text)
-    if path.is_file():
-        return path
-    names = task_names()
-    stem = path.name.removesuffix(".toml")
-    if path.parent == Path(".") and stem in names:
-        return TASKS_DIR / f"{stem}.toml"
-    close = difflib.get_close_matches(stem, names, n=1)
-    hint = f"did you mean '{close[0]}'? " if close else ""
-    raise InputError(path, None, f"file not found, nor a task name in assets/tasks/ ({hint}tasks: {', '.join(names) or 'none'})")
+    """The task file `text` names: an existing file, else a name in assets/tasks/ (see `named_file`)."""
+    return named_file(text, TASKS_DIR, "task")
 
 
 def task_reference(source: Path, folder: Path) -> str:

@@ -1,15 +1,20 @@
 """Keys and files of the user cache (offline results keyed by a hash of everything they depend on).
 
-Caches are disposable: an entry that cannot be read is deleted, recomputed, and the user told so in one line."""
+Caches are disposable: an entry that cannot be read is deleted, recomputed, and the user told so in one line. Entries are
+written atomically, and an entry being computed is locked (`computing`): processes needing the same entry (a suite's
+workers) compute it once, the others wait for it and read it."""
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import io
 import json
 import logging
+import os
 import zipfile
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TypeVar
 
@@ -42,6 +47,18 @@ def cache_path(kind: str, key: str) -> Path:
     with writing(folder):
         folder.mkdir(parents=True, exist_ok=True)
     return folder / key
+
+
+@contextlib.contextmanager
+def computing(entry: Path) -> Iterator[None]:
+    """Held while this process reads or computes a cache entry: another process asking for the same entry waits (flock)."""
+    with writing(entry.parent):
+        fd = os.open(entry.parent / f".{entry.name}.lock", os.O_CREAT | os.O_RDWR, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
 
 
 def read_cached(files: Sequence[Path], read: Callable[[], T], what: str) -> T | None:

@@ -13,8 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-import trimesh
+from planner.shapes import generate, obj_text
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TASK = ROOT / "assets" / "tasks" / "default.toml"
@@ -24,55 +23,17 @@ TASK_TEXT_ROBOT = DEFAULT_TASK.read_text().replace(f'robot = "{ROBOT}"', f'robot
 SUCCESS_RATE = 0.85  # issue 13: at least this fraction of (object, placement) pairs reach double grasps
 
 
-def _on_desk(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """The mesh with its bounding box centred in x, y and its bottom at z = 0 (where a task places it)."""
-    lo, hi = mesh.bounds
-    mesh.apply_translation([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]])
-    return mesh
-
-
-def _capsule(a: tuple[float, float, float], b: tuple[float, float, float], radius: float) -> trimesh.Trimesh:
-    """A capsule whose axis runs from a to b."""
-    pa, pb = np.asarray(a, float), np.asarray(b, float)
-    mesh = trimesh.creation.capsule(height=float(np.linalg.norm(pb - pa)), radius=radius, count=[16, 16])
-    T = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], pb - pa)
-    T[:3, 3] = (pa + pb) / 2
-    return mesh.apply_transform(T)
-
-
-def _animal(body: float, neck: tuple[float, float], leg: float, radius: float) -> trimesh.Trimesh:
-    """A four-legged capsule animal: body length, leg length, neck (forward, up), body radius (m)."""
-    hip, z = body / 2, leg + radius
-    parts = [_capsule((-hip, 0, z), (hip, 0, z), radius),
-             _capsule((hip, 0, z), (hip + neck[0], 0, z + neck[1]), radius * 0.55),
-             _capsule((hip + neck[0], 0, z + neck[1]), (hip + neck[0] + 0.035, 0, z + neck[1] - 0.01), radius * 0.5)]
-    for x in (hip * 0.8, -hip * 0.8):
-        for y in (radius * 0.6, -radius * 0.6):
-            parts.append(_capsule((x, y, z), (x, y, 0.008), radius * 0.35))
-    return trimesh.boolean.union(parts, engine="manifold")
-
-
-def _mug() -> trimesh.Trimesh:
-    """A mug: a revolved cup (closed bottom, open cavity) with a ring handle."""
-    profile = [[0.0, 0.0], [0.042, 0.0], [0.042, 0.11], [0.036, 0.11], [0.036, 0.008], [0.0, 0.008]]
-    cup = trimesh.creation.revolve(profile, sections=48)
-    handle = trimesh.creation.torus(major_radius=0.03, minor_radius=0.007, major_sections=32, minor_sections=12)
-    handle.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
-    handle.apply_translation([0.062, 0.0, 0.058])
-    return trimesh.boolean.union([cup, handle], engine="manifold")
-
-
 # Compact or flat objects (a 10 cm cube, a squat cylinder, a 4 cm thick torus lying flat) mostly fail: on the desk
 # only grasps from above are clear of it (fingertips kept 1 cm off), and two Allegro hands from above do not fit on them.
-OBJECTS: dict[str, Callable[[], trimesh.Trimesh]] = {
-    "box_long": lambda: trimesh.creation.box([0.22, 0.06, 0.07]),
-    "box_tall": lambda: trimesh.creation.box([0.08, 0.08, 0.18]),
-    "cylinder_tall": lambda: trimesh.creation.cylinder(radius=0.03, height=0.20, sections=48),
-    "cylinder_medium": lambda: trimesh.creation.cylinder(radius=0.045, height=0.14, sections=48),
-    "torus": lambda: trimesh.creation.torus(major_radius=0.07, minor_radius=0.035, major_sections=48, minor_sections=20),  # 7 cm thick
-    "mug": _mug,
-    "dachshund": lambda: _animal(body=0.13, neck=(0.03, 0.05), leg=0.035, radius=0.025),
-    "giraffe": lambda: _animal(body=0.09, neck=(0.05, 0.12), leg=0.08, radius=0.022),
+OBJECTS: dict[str, tuple[str, dict]] = {  # name -> (shape in planner/shapes.py, its parameters)
+    "box_long": ("box", {"size": (0.22, 0.06, 0.07)}),
+    "box_tall": ("box", {"size": (0.08, 0.08, 0.18)}),
+    "cylinder_tall": ("cylinder", {"radius": 0.03, "height": 0.20}),
+    "cylinder_medium": ("cylinder", {"radius": 0.045, "height": 0.14}),
+    "torus": ("torus", {"major_radius": 0.07, "minor_radius": 0.035}),  # 7 cm thick
+    "mug": ("mug", {}),
+    "dachshund": ("animal", {"body": 0.13, "neck": (0.03, 0.05), "leg": 0.035, "radius": 0.025}),
+    "giraffe": ("animal", {"body": 0.09, "neck": (0.05, 0.12), "leg": 0.08, "radius": 0.022}),
 }
 
 
@@ -93,11 +54,9 @@ PLACEMENTS = {  # the right hand picks, the left places; the tasks ask for the h
 
 def write_object(name: str, folder: Path) -> Path:
     """Generate an object, check it is a closed volume of 10-25 cm, and write it as an OBJ in `folder`."""
-    mesh = _on_desk(OBJECTS[name]())
-    if not (mesh.is_watertight and mesh.volume > 0 and 0.10 <= mesh.extents.max() <= 0.25):
-        raise RuntimeError(f"{name}: not a closed 10-25 cm volume (extents {mesh.extents})")
+    shape, params = OBJECTS[name]
     path = folder / f"{name}.obj"
-    path.write_text(trimesh.exchange.obj.export_obj(mesh, include_normals=False, include_texture=False, digits=6))
+    path.write_text(obj_text(generate(shape, params)))
     return path
 
 

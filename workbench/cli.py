@@ -146,6 +146,55 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_suite(args: argparse.Namespace) -> int:
+    import os
+
+    from planner.suite.executors import LocalExecutor, RayExecutor
+    from planner.suite.job import check_until
+    from planner.suite.run import run_suite
+    from planner.suite.spec import load_suite
+    from planner.task import load_task
+
+    from .suite_report import write_report
+
+    until = check_until(args.until)  # a bad --until or suite file fails here: no folder is made
+    spec = load_suite(args.suite)
+    local = args.workers or os.cpu_count() or 1
+    executor = RayExecutor(args.ray) if args.ray is not None else LocalExecutor(local)
+    say = lambda message: print(message, file=sys.stderr, flush=True)
+    out = Path(args.out)
+    run = run_suite(spec, out, executor, until, args.resume, args.force, local, say)
+    report = write_report(run.data, spec, load_task(spec.base_task).environment, out)
+    data = run.data
+    print(f"suite {spec.name}: {data['succeeded']} of {data['tasks']} tasks succeeded (success_rate {data['success_rate']:.3f}) "
+          f"through {data['until']} in {data['wall_seconds']:.0f} s")
+    for key, count in data["by_stage"].items():
+        print(f"  failed at {key}: {count}")
+    print(f"wrote {out / 'suite.json'}, {out / 'suite.csv'} and {report}")
+    return 0
+
+
+def positive_int(text: str) -> int:
+    """argparse type of a count: an integer of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at least 1, got '{text}'")
+    return value
+
+
+def suite_argument(text: str) -> Path:
+    """argparse type of SUITE: a suite file, or a name in assets/suites/."""
+    from planner.suite.spec import find_suite
+
+    try:
+        return find_suite(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
 def params_text() -> str:
     """Every pipeline step's parameters with their types and defaults, as `regrasp params` prints them."""
     from planner.pipeline import PIPELINE
@@ -334,6 +383,19 @@ def parser() -> argparse.ArgumentParser:
     pl.add_argument("--force", action="store_true", help="replace an existing session in --out")
     pl.add_argument("--set", action="append", metavar="STEP.PARAM=VALUE",
                     help="a step parameter, checked before any step runs (repeatable; `regrasp params` lists them)")
+    su = command("suite", "run every task of a suite through the pipeline (local workers or Ray) and report", _cmd_suite,
+                 epilog="The folder gets suite.json, suite.csv, report.html (open it in a browser), tasks/ (the generated task "
+                        "files), sessions/ (one session per task, for `regrasp replay`) and results/ (what --resume keeps).")
+    su.add_argument("suite", type=suite_argument, metavar="SUITE", help="a suite file, or the name of one in assets/suites/ (e.g. default)")
+    su.add_argument("--out", required=True, metavar="DIR", help="folder to write the suite's tasks, sessions and report into")
+    where = su.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=positive_int, metavar="N", help="local worker processes (default: the number of CPUs)")
+    where.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                       help="run the tasks as Ray tasks: on the cluster at ADDRESS, or on a local Ray when none is given "
+                            "(needs pip install 'regrasp[cluster]')")
+    su.add_argument("--until", metavar="STEP", help="last step of every task, e.g. double-grasps (default: every step, through motion)")
+    su.add_argument("--resume", action="store_true", help="continue the suite in --out: finished tasks are kept, the others run")
+    su.add_argument("--force", action="store_true", help="replace an existing suite in --out")
     command("params", "list every step's parameters with their types and defaults", _cmd_params)
     r = command("replay", "open the workbench on a saved session (nothing is recomputed)", _cmd_replay)
     r.add_argument("session", metavar="SESSION", help="session folder")

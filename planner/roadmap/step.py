@@ -10,7 +10,7 @@ from ..results import load_result, read_only, save_result
 from ..steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
 from ..task import Scene
 from ..user_cache import cache_key as hash_key
-from ..user_cache import cache_path, read_cached
+from ..user_cache import cache_path, computing, read_cached
 from .build import build_roadmap
 from .result import Roadmap, RoadmapParams
 
@@ -33,13 +33,14 @@ def roadmap_for(scene: Scene, params: RoadmapParams, seed: int, use_cache: bool 
                 progress: Progress = no_progress) -> tuple[Roadmap, dict[str, float]]:
     """(the roadmap, the seconds of each stage built: empty when it came from the cache); a built roadmap is written to the cache."""
     path = cache_path("roadmaps", cache_key(scene, params, seed))
-    if use_cache:
-        cached = read_cached([path.with_suffix(".json"), path.with_suffix(".npz")], lambda: load_result(Roadmap, path.parent, path.name),
-                             "roadmap")
-        if cached is not None:
-            return cached, {}
-    roadmap, seconds = build_roadmap(scene, params, seed, progress)
-    save_result(roadmap, path.parent, path.name)
+    with computing(path):
+        if use_cache:
+            cached = read_cached([path.with_suffix(".json"), path.with_suffix(".npz")],
+                                 lambda: load_result(Roadmap, path.parent, path.name), "roadmap")
+            if cached is not None:
+                return cached, {}
+        roadmap, seconds = build_roadmap(scene, params, seed, progress)
+        save_result(roadmap, path.parent, path.name)
     return read_only(roadmap), seconds
 
 
