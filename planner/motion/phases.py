@@ -292,17 +292,19 @@ class PhasePlanner:
         oi, of = scene.object_initial, scene.object_final
         open_a, open_b = (self.open[self.robot.hand_idx[h.arm]] for h in (a, b))
 
-        # exact grasps, so the object's pose is continuous where it changes hands (a direct transfer: one hand holds it
-        # from the grasp to the placement)
+        # exact grasps, so the object's pose is continuous where it changes hands: each hand holds it as its grasp and place
+        # configurations do (within their IK tolerance of the listed grasp), and the exchange, in the air where both
+        # arms have room, is refined to join them (a placement at the edge of the workspace, the torso at its limits,
+        # cannot move its palm by the millimetres); a direct transfer: one hand holds it from the grasp to the placement
         direct = a.arm == b.arm
         g_a = np.linalg.inv(oi) @ self.palm(q_grasp, a.arm)
         if direct:
             g_b = g_a
+            q_place = self.refine(q_place, b.arm, of @ g_b, None, 2, "place")
         else:
+            g_b = np.linalg.inv(of) @ self.palm(q_place, b.arm)
             x = self.palm(q_exch, a.arm) @ np.linalg.inv(g_a)
-            q_exch = self.refine(q_exch, b.arm, x @ b.palm_in_object, a.arm, 1, "exchange")
-            g_b = np.linalg.inv(x) @ self.palm(q_exch, b.arm)
-        q_place = self.refine(q_place, b.arm, of @ g_b, None, 2, "place")
+            q_exch = self.refine(q_exch, b.arm, x @ g_b, a.arm, 1, "exchange")
         static_i, static_f = Situation(None, oi), Situation(None, of)
         held_a, held_b = Situation(a.arm, g_a), Situation(b.arm, g_b)
         tips_a = fingertip_geometries(self.cm, a.arm, a.touching)
