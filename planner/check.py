@@ -183,6 +183,8 @@ def check_task(scene: Scene, cm: CollisionModel | None = None, params: ArmsParam
     reaches = placement_reach(scene, cm.checker(), params.seeds, params.tolerance)
     decision = decide(scene, reaches)
     problems = list(v.problems) + ([decision.failure] if decision.failure and decision.handover else [])
-    arms = decision.choice if decision.failure else f"{decision.picking_arm} picks, {decision.placing_arm} places ({decision.choice})"
+    who = (f"the {decision.picking_arm} arm picks and places" if decision.picking_arm == decision.placing_arm
+           else f"{decision.picking_arm} picks, {decision.placing_arm} places")
+    arms = decision.choice if decision.failure else f"{who} ({decision.choice})"
     return TaskReport(scene.name, robot.spec.name, dof, pairs, v.config_collisions, v.placement_collisions, reaches,
                       params.tolerance, arms, decision.handover, tuple(problems), v.warnings)

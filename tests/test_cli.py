@@ -58,7 +58,7 @@ def test_check_reports_a_task_that_needs_no_regrasp(tmp_path):
     task.write_text(text.replace('robot = "alex_allegro.toml"', f'robot = "{ASSETS / "robots" / "alex_allegro.toml"}"'))
     run = regrasp("check", str(task))
     assert run.returncode == 0, run.stdout + run.stderr  # a valid task: one arm carries the object, no handover
-    assert "arms: no handover is needed: the right arm reaches both placements" in run.stdout
+    assert "arms: the right arm picks and places (no handover is needed: the right arm reaches both placements" in run.stdout
     assert "handover = true" in run.stdout and "OK: a valid pick-and-place task for one arm (no handover)" in run.stdout
 
 
