@@ -88,7 +88,8 @@ def _reached(reaches: dict[str, dict[str, ReachResult]], name: str) -> list[str]
 
 
 def forced_decision(scene: Scene, forced: tuple[str, str]) -> Decision:
-    """The arms the step's parameters force, or a RegraspError when they are not two different arms of the robot."""
+    """The arms the step's parameters force (the same arm twice: a direct transfer), or a RegraspError when one is not an
+    arm of the robot."""
     names = scene.robot.spec.arm_names
     if not all(a in names for a in forced):
         raise RegraspError(f"arms: picking_arm and placing_arm must be arms of the robot ({', '.join(names)}; the same one "

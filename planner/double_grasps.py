@@ -159,24 +159,27 @@ def run(ctx: StepContext) -> StepOutput:
     sampler = ConfigSampler(robot, collision, ConfigScorer(robot, config_params.weights()), config_params)
     approach = {arm: approach_direction(robot, arm) for arm in (a, b)}
     shoulders = dict(zip(robot.spec.arm_names, np.asarray(exchange.shoulders)))
-    found, tried = [(k, hq.q[j[k]], scene.object_final) for k in order[: p.count]] if direct else [], 0
-    for k in [] if direct else order[: p.max_pairs]:
-        if len(found) >= p.count or not len(exchange.best):
-            break
-        tried += 1
-        ctx.progress(tried / p.max_pairs, f"exchange configuration of pair {tried} ({len(found)} found)")
-        r1, r2 = hp.rank[i[k]], hq.rank[j[k]]
-        H1, H2 = pick.hand_pose[r1], place.hand_pose[r2]
-        node = exchange.position
-        R = exchange_orientation([H1[:3, :3] @ approach[a], H2[:3, :3] @ approach[b]],
-                                 [(node - shoulders[a]) / np.linalg.norm(node - shoulders[a]),
-                                  (node - shoulders[b]) / np.linalg.norm(node - shoulders[b])])
-        starts = (scene.q_initial, hp.q[i[k]], hq.q[j[k]])
-        hands = ((a, H1, pick.finger_q[r1]), (b, H2, place.finger_q[r2]))
-        result = exchange_configuration(sampler, collision, hands, R, node, starts, p, ctx.rng)
-        if result is not None:
-            found.append((k, *result))
-    if not direct:
+    found: list = []
+    tried = 0
+    if direct:  # each grasp is its own pair; its place configuration stands for the exchange (there is none)
+        found = [(k, hq.q[j[k]], scene.object_final) for k in order[: p.count]]
+    else:
+        for k in order[: p.max_pairs]:
+            if len(found) >= p.count or not len(exchange.best):
+                break
+            tried += 1
+            ctx.progress(tried / p.max_pairs, f"exchange configuration of pair {tried} ({len(found)} found)")
+            r1, r2 = hp.rank[i[k]], hq.rank[j[k]]
+            H1, H2 = pick.hand_pose[r1], place.hand_pose[r2]
+            node = exchange.position
+            R = exchange_orientation([H1[:3, :3] @ approach[a], H2[:3, :3] @ approach[b]],
+                                     [(node - shoulders[a]) / np.linalg.norm(node - shoulders[a]),
+                                      (node - shoulders[b]) / np.linalg.norm(node - shoulders[b])])
+            starts = (scene.q_initial, hp.q[i[k]], hq.q[j[k]])
+            hands = ((a, H1, pick.finger_q[r1]), (b, H2, place.finger_q[r2]))
+            result = exchange_configuration(sampler, collision, hands, R, node, starts, p, ctx.rng)
+            if result is not None:
+                found.append((k, *result))
         log.done("exchange configurations", len(found), f"of {tried} pairs tried, {p.attempts} samples each")
     failure = ""
     if direct and not len(pairs):

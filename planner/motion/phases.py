@@ -283,7 +283,8 @@ class PhasePlanner:
 
     # ----- the task
     def plan(self, q_grasp: np.ndarray, q_exch: np.ndarray, q_place: np.ndarray, a: HandGrasp, b: HandGrasp) -> list[Piece]:
-        """Every piece from q_initial to q_final through the double grasp (a: the picking hand, b: the placing hand).
+        """Every piece from q_initial to q_final through the double grasp (a: the picking hand, b: the placing hand; the
+        same hand and grasp for a direct transfer, whose Carry takes the object to above its placement).
 
         The contact motions come first and every transit's ends are checked ready: a double grasp that cannot work
         fails in a fraction of a second, before any transit is searched. Where a transit fails, the next pre-grasp
