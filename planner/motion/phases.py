@@ -12,7 +12,9 @@ The object is lifted off and set down along the freest of several directions (ve
 it is free: a lamp may hang over a placement), so that transits start and end where they can leave.
 Every contact motion is made, and every transit end checked, before any transit is searched: a
 double grasp that cannot work is given up in a fraction of a second. Where a transit fails, the next
-candidate end of that hand (pre-grasp, set-down) is tried.
+candidate end of that hand (pre-grasp, set-down) is tried. A hand backs off from a grasp along its
+approach direction first, then along directions tilted from it (where fingers coming straight in
+would sweep the object or its support).
 Straight hand motions are IK waypoints of the arm and the torso; while the other hand holds the
 object, its palm is held still by the same IK, so the object does not move. Every piece is checked
 with the validity of its situation; a piece that fails raises `PieceFailed` naming the phase and the
@@ -21,6 +23,7 @@ part.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -142,29 +145,46 @@ class PhasePlanner:
         self.stats[phase].seconds_contact += time.perf_counter() - t
         return np.array(out)
 
-    def retreats(self, q: np.ndarray, arm: str, keep: str | None, hover: bool, phase: int, part: str) -> Iterator[np.ndarray]:
-        """Candidate IK polylines from q (the palm at a grasp) backing off along the approach direction (the pre-grasp
-        distance, farther, nearer), then rising by the lift height when `hover` (the object rests on a support there;
-        elsewhere rising is the last resort). Candidates the arm cannot follow are skipped."""
-        up, back = np.array([0.0, 0.0, self.p.lift]), self.backoff(q, arm)
+    def retreats(self, q: np.ndarray, arm: str, keep: str | None, hover: bool, phase: int, part: str) -> list[Iterator[np.ndarray]]:
+        """Two groups of candidate IK polylines from q (the palm at a grasp) backing off by the pre-grasp distance: along
+        the approach direction (that distance, farther, nearer), then rising by the lift height when `hover` (the object
+        rests on a support there; elsewhere rising is the last resort); then tilted 30° and 55° from the approach
+        direction in six directions each (where fingers moving along it would sweep the object or a support), rising
+        likewise. Each group is computed only when it is reached; candidates the arm cannot follow are skipped."""
+        back = self.backoff(q, arm)
         rises = (1.0, 1.0, 2.0, 1.0) if hover else (0.0, 0.0, 0.0, 1.0)
-        for scale, rise in zip((1.0, 1.7, 1.0, 0.5) if hover else (1.0, 1.7, 0.5, 1.0), rises):
+        along = [(scale * back, rise) for scale, rise in zip((1.0, 1.7, 1.0, 0.5) if hover else (1.0, 1.7, 0.5, 1.0), rises)]
+        axis = back / np.linalg.norm(back)
+        u = np.cross(axis, [0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(axis, u)
+        tilted = [(np.linalg.norm(back) * (np.cos(t) * axis + np.sin(t) * (np.cos(az) * u + np.sin(az) * v)), rises[0])
+                  for t in np.radians([30.0, 55.0]) for az in np.radians(np.arange(0.0, 360.0, 60.0))]
+        return [self._backing(q, arm, keep, offsets, phase, part) for offsets in (along, tilted)]
+
+    def _backing(self, q: np.ndarray, arm: str, keep: str | None, offsets: list[tuple[np.ndarray, float]], phase: int,
+                 part: str) -> Iterator[np.ndarray]:
+        """The IK polylines moving the palm from q by each world offset, then up by `rise` lift heights (see retreats)."""
+        up = np.array([0.0, 0.0, self.p.lift])
+        for offset, rise in offsets:
             try:
-                path = self.straight(q, arm, scale * back, keep, phase, part)
+                path = self.straight(q, arm, offset, keep, phase, part)
                 if rise:
                     path = np.concatenate([path, self.straight(path[-1], arm, rise * up, keep, phase, part)[1:]])
             except PieceFailed:
                 continue
             yield path
 
-    def shaped(self, grasp: HandGrasp, retreats: Iterator[np.ndarray]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """(pre-shape, approach path reversed with the fingers in it) candidates: each retreat with the fingers open by the
-        pre-shape fraction, then half and a fifth as much (fingers sweep less where the hands are close)."""
-        paths = list(retreats)
-        for fraction in (self.p.preshape, 0.5 * self.p.preshape, 0.2 * self.p.preshape):
-            pre = self.opened(grasp, fraction)
-            for path in paths:
-                yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
+    def shaped(self, grasp: HandGrasp, groups: list[Iterator[np.ndarray]]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """(pre-shape, approach path reversed with the fingers in it) candidates, group by group (see retreats): each
+        retreat with the fingers open by the pre-shape fraction, then half and a fifth as much (fingers sweep less where
+        the hands are close)."""
+        for group in groups:
+            paths = list(group)
+            for fraction in (self.p.preshape, 0.5 * self.p.preshape, 0.2 * self.p.preshape):
+                pre = self.opened(grasp, fraction)
+                for path in paths:
+                    yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
 
     def ready(self, q: np.ndarray, situation: Situation, phase: int, part: str) -> float:
         """PieceFailed unless a transit can start or end at q in the situation: q is valid with the transit paddings
@@ -360,7 +380,7 @@ class PhasePlanner:
             let_go_a = self.fingers(1, "opening", q_both, a.arm, let_a, released)
 
             q_let = self.with_fingers(q_both, a.arm, let_a)
-            retreat_a = next(self.options(1, "retreat", self.retreats(q_let, a.arm, b.arm, False, 1, "retreat"),
+            retreat_a = next(self.options(1, "retreat", itertools.chain(*self.retreats(q_let, a.arm, b.arm, False, 1, "retreat")),
                                           leave(released, held_b, 1, a.arm)))
 
         # Place: (above the placement, set-down) candidates; the picking hand keeps its fingers as they let go until the
@@ -377,7 +397,7 @@ class PhasePlanner:
         let_go = Situation(None, of, tips_b)
         let_go_b = self.fingers(2, "opening", q_down, b.arm, let_b, let_go)
         q_let_b = self.with_fingers(q_down, b.arm, let_b)
-        retreat_b = next(self.options(2, "retreat", self.retreats(q_let_b, b.arm, None, True, 2, "retreat"),
+        retreat_b = next(self.options(2, "retreat", itertools.chain(*self.retreats(q_let_b, b.arm, None, True, 2, "retreat")),
                                       leave(let_go, static_f, 2, b.arm)))
 
         # Rest: to the final configuration, then both hands open
