@@ -30,13 +30,14 @@ from workbench.cli import main
 from workbench.suite_report import write_report
 
 UNTIL = "place_grasps"
-# four statuettes near the default task's placements (the right arm picks, the left places), at other positions and headings
+# four statuettes near the default task's placements (the right arm picks, the left places), at other positions and headings;
+# planned with the session tests' seed, whose statuette grasp lists are in the shared test cache
 SUITE = """
 name = "four"
 task = "default"
 tasks = 4
 seed = 1
-plan_seed = 0
+plan_seed = 3
 attempts = 20
 
 [[objects]]
