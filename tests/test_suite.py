@@ -30,14 +30,14 @@ from workbench.cli import main
 from workbench.suite_report import write_report
 
 UNTIL = "place_grasps"
-# four statuettes near the default task's placements (the right arm picks, the left places), at other positions and headings;
-# planned with the session tests' seed, whose statuette grasp lists are in the shared test cache
-SUITE = """
+PLAN_SEED = 3  # the session tests' seed, whose statuette grasp lists are in the shared test cache
+# four statuettes near the default task's placements (the right arm picks, the left places), at other positions and headings
+SUITE = f"""
 name = "four"
 task = "default"
 tasks = 4
 seed = 1
-plan_seed = 3
+plan_seed = {PLAN_SEED}
 attempts = 20
 
 [[objects]]
@@ -180,7 +180,7 @@ def test_suite_records_every_task(local_run):
     for r in data["results"]:
         assert r["steps"] == ["arms", "pick_grasps", "place_grasps"] and r["success"]
         session = json.loads((local_run / r["session"] / "session.json").read_text())
-        assert session["task_source"] == f"../../tasks/{r['id']}.toml" and session["seed"] == 0
+        assert session["task_source"] == f"../../tasks/{r['id']}.toml" and session["seed"] == PLAN_SEED
         assert (local_run / "tasks" / f"{r['id']}.toml").is_file()
     rows = (local_run / "suite.csv").read_text().splitlines()
     assert len(rows) == 5 and rows[0].startswith("id,object,initial_region,final_region") and ",True," in rows[1]
