@@ -13,7 +13,7 @@ import trimesh
 
 from .errors import RegraspError
 
-SIZE_RANGE = (0.10, 0.25)  # m: the largest extent of a generated object (what two Allegro hands can pass between them)
+SIZE_RANGE = (0.10, 0.25)  # m: the largest extent of a generated object (what the default robot's hands can pass between them)
 
 
 def on_desk(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
