@@ -231,6 +231,8 @@ def build_collision_model(robot: Robot, environment: Environment = (), params: C
     hands = [f"{a}_hand" for a in robot.spec.arm_names]
     subsets["hands"] = k[((pa == hands[0]) & (pb == hands[1])) | ((pa == hands[1]) & (pb == hands[0]))]
     support = joint_support(robot.model, [o.parentJoint for o in gm.geometryObjects])
+    for a in (ends, support):
+        a.setflags(write=False)  # the model is shared read-only
     return CollisionModel(robot, gm, pair_set, params, n_robot, parts, subsets, ends, support)
 
 

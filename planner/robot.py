@@ -33,20 +33,11 @@ class Robot:
     arm_idx: dict[str, np.ndarray]
     hand_idx: dict[str, np.ndarray]
     finger_idx: dict[str, dict[str, np.ndarray]]
+    joint_axes: np.ndarray  # (njoints, 3) each joint's rotation axis in its own frame (row 0: the universe), for displacement bounds
 
     @property
     def nq(self) -> int:
         return self.model.nq
-
-    @functools.cached_property
-    def joint_axes(self) -> np.ndarray:
-        """(njoints, 3) each joint's rotation axis in its own frame (row 0: the universe, unused), for displacement bounds."""
-        data = self.model.createData()
-        pin.computeJointJacobians(self.model, data, pin.neutral(self.model))
-        axes = np.zeros((self.model.njoints, 3))
-        for j in range(1, self.model.njoints):
-            axes[j] = pin.getJointJacobian(self.model, data, j, pin.LOCAL)[3:, self.model.joints[j].idx_v]
-        return axes
 
     def part_idx(self, part: str) -> np.ndarray:
         """q indices of 'torso', an arm name, '<arm>_hand', or '<arm>_hand/<finger>'."""
@@ -111,6 +102,16 @@ def _configuration(model: pin.Model, values: dict[str, float], base: np.ndarray)
     for name, value in values.items():
         q[names.index(name)] = value
     return q
+
+
+def joint_axes(model: pin.Model) -> np.ndarray:
+    """(njoints, 3) each joint's rotation axis in its own frame (row 0: the universe, unused)."""
+    data = model.createData()
+    pin.computeJointJacobians(model, data, pin.neutral(model))
+    axes = np.zeros((model.njoints, 3))
+    for j in range(1, model.njoints):
+        axes[j] = pin.getJointJacobian(model, data, j, pin.LOCAL)[3:, model.joints[j].idx_v]
+    return axes
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:
@@ -271,7 +272,7 @@ def build_robot(spec: RobotSpec) -> Robot:
         raise InputError(spec.source, fld, f"rest configuration outside the joint limits: {names}")
     return Robot(spec, model, coll, vis, _read_only(lower), _read_only(upper), _read_only(q_rest), _read_only(torso_idx),
                  {a: _read_only(i) for a, i in arm_idx.items()}, {a: _read_only(i) for a, i in hand_idx.items()},
-                 {a: {f: _read_only(i) for f, i in fi.items()} for a, fi in finger_idx.items()})
+                 {a: {f: _read_only(i) for f, i in fi.items()} for a, fi in finger_idx.items()}, _read_only(joint_axes(model)))
 
 
 @functools.lru_cache(maxsize=8)

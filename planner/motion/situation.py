@@ -98,6 +98,8 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
                "object": new_robot}
     ends = np.concatenate([cm.ends, np.array([(g, o) for g in env_partners + robot_partners], np.int64).reshape(-1, 2)])
     support = np.concatenate([cm.support, joint_support(robot.model, [gm.geometryObjects[o].parentJoint])])
+    for a in (ends, support):
+        a.setflags(write=False)  # the model is shared read-only
     out = dataclasses.replace(cm, geometry=gm, subsets=subsets, ends=ends, support=support)
     changes = out.relative_joints()[:, moving].any(axis=1)
     subsets["moving"] = np.flatnonzero(changes)
