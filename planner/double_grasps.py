@@ -35,7 +35,7 @@ from .steps import Step, StepContext, StepOutput
 
 @dataclass(frozen=True)
 class DoubleGraspParams:
-    count: int = 6  # double grasps wanted with an exchange configuration
+    count: int = 20  # double grasps wanted with an exchange configuration (the motion falls back down this list)
     max_pairs: int = 40  # pairs tried, best first, before giving up
     attempts: int = 16  # exchange configurations sampled per pair
     position_sigma: float = 0.03  # m: object position around the best exchange node

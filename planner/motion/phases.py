@@ -178,11 +178,13 @@ class PhasePlanner:
     def shaped(self, grasp: HandGrasp, groups: list[Iterator[np.ndarray]]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """(pre-shape, approach path reversed with the fingers in it) candidates, group by group (see retreats): each
         retreat with the fingers open by the pre-shape fraction, then half and a fifth as much (fingers sweep less where
-        the hands are close)."""
+        the hands are close), then the hand wide open, spreading joints too (an opposed thumb, opened only at its flexing
+        joints, still reaches across the object)."""
+        hand = self.robot.hand_idx[grasp.arm]
+        shapes = [self.opened(grasp, f) for f in (self.p.preshape, 0.5 * self.p.preshape, 0.2 * self.p.preshape)] + [self.open[hand]]
         for group in groups:
             paths = list(group)
-            for fraction in (self.p.preshape, 0.5 * self.p.preshape, 0.2 * self.p.preshape):
-                pre = self.opened(grasp, fraction)
+            for pre in shapes:
                 for path in paths:
                     yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
 
@@ -261,11 +263,26 @@ class PhasePlanner:
         return Piece(phase, part, np.asarray(path), situation, hand)
 
     def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
-        """The hand's fingers moving to `values` (nothing when they are there)."""
+        """The hand's fingers moving to `values` (nothing when they are there): all joints at once, else each finger's
+        last joint first, else last (a finger curling onto a rounded surface sweeps its middle link through it when
+        its joints move together); the first valid, or the all-at-once motion's failure."""
         target = self.with_fingers(q, arm, values)
         if np.allclose(target, q):
             return []
-        return [self.contact(phase, part, np.stack([q, target]), situation, arm)]
+        last = np.array([idx[-1] for idx in self.robot.finger_idx[arm].values()])
+        paths = [np.stack([q, target])]
+        for first in (last, np.setdiff1d(self.robot.hand_idx[arm], last)):
+            middle = q.copy()
+            middle[first] = target[first]
+            if not (np.allclose(middle, q) or np.allclose(middle, target)):
+                paths.append(np.stack([q, middle, target]))
+        failure = None
+        for path in paths:
+            try:
+                return [self.contact(phase, part, path, situation, arm)]
+            except PieceFailed as exc:
+                failure = failure or exc
+        raise failure
 
     def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, arm: str | None = None) -> Piece:
         """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline);

@@ -34,7 +34,7 @@ class MotionParams:
     rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension, joint-space distance)
     shortcut_attempts: int = 16  # random shortcuts per transit
     goal_nodes: int = 16  # transit: an end the graph cannot reach is reconnected to this many of its nearest valid nodes
-    max_double_grasps: int = 6  # double grasps tried, best first
+    max_double_grasps: int = 20  # double grasps tried, best first
     transit_env_padding: float = 0.03  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's),
     transit_self_padding: float = 0.015  # m: robot-robot and robot-object pairs likewise (both lowered per transit
     # to what its two ends allow)
