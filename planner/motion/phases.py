@@ -41,7 +41,7 @@ from ..roadmap.local_planner import geometry_radii
 from ..task import Scene
 from .graph import MotionGraph
 from .result import PHASES
-from .situation import Situation, fingertip_geometries, situation_model
+from .situation import Situation, finger_geometries, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
 from .validity import Clearances, Profile, Validity, far, fits, fitted, make_validity
@@ -105,6 +105,7 @@ class PhasePlanner:
         self.models: dict[tuple, CollisionModel] = {}
         self.validities: dict[tuple, Validity] = {}
         self.distances: dict[int, Clearances] = {}
+        self.finger_names = {arm: self.finger_of_geometry(arm) for arm in robot.spec.arm_names}
 
     # ----- kinematics
     def palm(self, q: np.ndarray, arm: str) -> np.ndarray:
@@ -175,18 +176,71 @@ class PhasePlanner:
                 continue
             yield path
 
-    def shaped(self, grasp: HandGrasp, groups: list[Iterator[np.ndarray]]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    def shaped(self, grasp: HandGrasp, groups: list[Iterator[np.ndarray]], situation: Situation) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """(pre-shape, approach path reversed with the fingers in it) candidates, group by group (see retreats): each
-        retreat with the fingers open by the pre-shape fraction, then half and a fifth as much (fingers sweep less where
-        the hands are close), then the hand wide open, spreading joints too (an opposed thumb, opened only at its flexing
-        joints, still reaches across the object)."""
-        hand = self.robot.hand_idx[grasp.arm]
-        shapes = [self.opened(grasp, f) for f in (self.p.preshape, 0.5 * self.p.preshape, 0.2 * self.p.preshape)] + [self.open[hand]]
+        retreat with the fingers shaped for it (see preshape)."""
         for group in groups:
-            paths = list(group)
-            for pre in shapes:
-                for path in paths:
-                    yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
+            for path in group:
+                pre = self.preshape(grasp, path, situation)
+                yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
+
+    def preshape(self, grasp: HandGrasp, path: np.ndarray, situation: Situation) -> np.ndarray:
+        """Finger values for approaching along a retreat path (reversed): open by the pre-shape fraction; a finger the
+        approach makes collide is tried wide open (its spreading joint too: an opposed thumb, opened only at its flexing
+        joints, can reach across the object), then open by half, a fifth, not at all (see per_finger)."""
+        levels = [self.opened(grasp, self.p.preshape), self.open[self.robot.hand_idx[grasp.arm]]] + [
+            self.opened(grasp, f) for f in (0.5 * self.p.preshape, 0.2 * self.p.preshape)] + [grasp.fingers]
+
+        def collisions(pre: np.ndarray) -> list[tuple[str, str]]:
+            approach = np.array([self.with_fingers(q, grasp.arm, pre) for q in path])[::-1]
+            validity = self.validity(self.model(situation, approach[0], np.flatnonzero(np.ptp(approach, axis=0) > 0)),
+                                     self.contact_profile)
+            return [] if validity.path_valid(approach) else validity.first_collision(approach)
+
+        return self.per_finger(grasp, levels, collisions)
+
+    def letting_go(self, grasp: HandGrasp, q: np.ndarray, situation: Situation) -> np.ndarray:
+        """Finger values letting go of the object held at q: the touching fingers open by the release fraction; one the
+        opening makes collide (a thumb extending into the support) opens by half, a fifth, or stays (see per_finger)."""
+        levels = [self.opened(grasp, f * self.p.release, True) for f in (1.0, 0.5, 0.2)] + [grasp.fingers]
+        hand = self.robot.hand_idx[grasp.arm]
+
+        def collisions(values: np.ndarray) -> list[tuple[str, str]]:
+            path = np.stack([q, self.with_fingers(q, grasp.arm, values)])
+            if np.allclose(path[0], path[1]):
+                return []
+            validity = self.validity(self.model(situation, q, hand), self.contact_profile)
+            return [] if validity.path_valid(path) else validity.first_collision(path)
+
+        return self.per_finger(grasp, levels, collisions)
+
+    def per_finger(self, grasp: HandGrasp, levels: list[np.ndarray], collisions: Callable[[np.ndarray], list]) -> np.ndarray:
+        """Finger values with each finger at one of `levels` (hand values, in order of preference): all start at the
+        first; while `collisions` of the values names pairs, every finger in them moves to its next level (opening a
+        finger swings it out, into the support or the other hand as often as away from the object). Stops when nothing
+        collides, or when a colliding pair has no finger of this hand or a finger is at its last level (the last values
+        are returned: the piece built from them fails with its message)."""
+        arm = grasp.arm
+        hand, fingers, of_geometry = self.robot.hand_idx[arm], self.robot.finger_idx[arm], self.finger_names[arm]
+        level = dict.fromkeys(fingers, 0)
+        while True:
+            values = grasp.fingers.copy()
+            for f, idx in fingers.items():
+                at = np.isin(hand, idx)
+                values[at] = levels[level[f]][at]
+            per_pair = [{of_geometry[n] for n in pair if n in of_geometry} for pair in collisions(values)]
+            hit = set().union(*per_pair)
+            if not per_pair or not all(per_pair) or any(level[f] == len(levels) - 1 for f in hit):
+                return values
+            for f in hit:
+                level[f] += 1
+
+    def finger_of_geometry(self, arm: str) -> dict[str, str]:
+        """Geometry name -> finger name, for the geometries an arm's finger joints move."""
+        model, objects = self.robot.model, self.cm.geometry.geometryObjects
+        joint_finger = {int(j): f for f, idx in self.robot.finger_idx[arm].items() for j in idx}
+        return {objects[g].name: joint_finger[model.joints[objects[g].parentJoint].idx_q]
+                for g in finger_geometries(self.cm, arm).tolist()}
 
     def ready(self, q: np.ndarray, situation: Situation, phase: int, part: str) -> float:
         """PieceFailed unless a transit can start or end at q in the situation: q is valid with the transit paddings
@@ -326,7 +380,7 @@ class PhasePlanner:
         The contact motions come first and every transit's ends are checked ready: a double grasp that cannot work
         fails in a fraction of a second, before any transit is searched. Where a transit fails, the next pre-grasp
         candidate of that hand is tried."""
-        scene, p = self.scene, self.p
+        scene = self.scene
         oi, of = scene.object_initial, scene.object_final
         open_a, open_b = (self.open[self.robot.hand_idx[h.arm]] for h in (a, b))
 
@@ -348,7 +402,6 @@ class PhasePlanner:
         tips_a = fingertip_geometries(self.cm, a.arm, a.touching)
         tips_b = fingertip_geometries(self.cm, b.arm, b.touching)
         support_i, support_f = self.supports(oi), self.supports(of)
-        let_a, let_b = self.opened(a, p.release, True), self.opened(b, p.release, True)
 
         # Grasp: (pre-grasp, pre-shape + approach + closing) candidates
         def grasp(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
@@ -360,7 +413,7 @@ class PhasePlanner:
             self.ready(q_pre, static_i, 0, "pre-grasp")
             return q_pre, out
 
-        grasps = self.options(0, "pre-grasp", self.shaped(a, self.retreats(q_grasp, a.arm, None, True, 0, "pre-grasp")), grasp)
+        grasps = self.options(0, "pre-grasp", self.shaped(a, self.retreats(q_grasp, a.arm, None, True, 0, "pre-grasp"), static_i), grasp)
         first_grasp = next(grasps)
 
         # Carry: the lift, (exchange pre-grasp, its approach and closing) candidates, the picking hand letting go and retreating
@@ -390,10 +443,11 @@ class PhasePlanner:
 
         if not direct:  # the placing hand's exchange pre-grasp, approach and closing; the picking hand letting go
             backoffs = self.retreats(q_x, b.arm, a.arm, False, 1, "exchange pre-grasp")
-            exchanges = self.options(1, "exchange pre-grasp", self.shaped(b, backoffs), exchange)
+            exchanges = self.options(1, "exchange pre-grasp", self.shaped(b, backoffs, held_a), exchange)
             first_exchange = next(exchanges)
             released = Situation(b.arm, g_b, tips_a)
             q_both = self.with_fingers(q_x, b.arm, b.fingers)
+            let_a = self.letting_go(a, q_both, released)
             let_go_a = self.fingers(1, "opening", q_both, a.arm, let_a, released)
 
             q_let = self.with_fingers(q_both, a.arm, let_a)
@@ -412,13 +466,14 @@ class PhasePlanner:
         downs = freest(self.options(2, "set-down", iter(self.lifts(of, q_place, b.arm, 2)), set_down))
         first_down = next(downs)
         let_go = Situation(None, of, tips_b)
+        let_b = self.letting_go(b, q_down, let_go)
         let_go_b = self.fingers(2, "opening", q_down, b.arm, let_b, let_go)
         q_let_b = self.with_fingers(q_down, b.arm, let_b)
         retreat_b = next(self.options(2, "retreat", itertools.chain(*self.retreats(q_let_b, b.arm, None, True, 2, "retreat")),
                                       leave(let_go, static_f, 2, b.arm)))
 
         # Rest: to the final configuration, then both hands open
-        q_end = self.with_fingers(self.with_fingers(scene.q_final, a.arm, let_a), b.arm, let_b)
+        q_end = self.with_fingers(scene.q_final if direct else self.with_fingers(scene.q_final, a.arm, let_a), b.arm, let_b)
         self.ready(q_end, static_f, 3, "final configuration")
         opening = [] if np.allclose(q_end, scene.q_final) else [
             self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f, None)]
