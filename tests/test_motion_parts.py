@@ -261,3 +261,61 @@ def test_the_independent_check_catches_a_checker_blind_to_the_carried_object(exa
     monkeypatch.setattr(situation, "situation_model", blind)
     hits, _ = _carry(example, carried, first=True)
     assert any("the object with" in h for h in hits), "a checker blind to the carried object's obstacles went unnoticed"
+
+
+def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
+    """Letting go at the example's placement with a small block put where one touching finger's tip goes when it opens
+    by the release fraction: that finger opens less (or stays), the others open fully, and the opening motion found is
+    free of the block by the independent check (the robot's URDF geometry through python-fcl, 50 samples)."""
+    import dataclasses
+
+    import pinocchio as pin
+
+    from planner.collision import build_collision_model
+    from planner.environment import Obstacle
+    from planner.motion.graph import MotionGraph
+    from planner.motion.phases import PhasePlanner
+    from planner.motion.situation import Situation, fingertip_geometries
+    from planner.motion.step import contact_profile, hand_grasp
+    from planner.motion.validity import transit_profile
+    from planner.session import Session
+
+    scene, roadmap, _ = example
+    session = Session.open(EXAMPLE)
+    dg, place = session.result("double_grasps"), session.result("place_grasps")
+    b = hand_grasp(place, int(dg.place_rank[0]))
+    robot, p = scene.robot, MotionParams()
+    finger = b.touching[0]
+    idx = robot.finger_idx[b.arm][finger]
+
+    def tip(q):
+        data = robot.model.createData()
+        pin.framesForwardKinematics(robot.model, data, q)
+        frame = robot.spec.arm(b.arm).hand.prefixed(next(f.tip_frame for f in robot.spec.arm(b.arm).hand.fingers if f.name == finger))
+        return data.oMf[robot.frame_id(frame)].translation.copy()
+
+    def planner_for(s):
+        return PhasePlanner(s, build_collision_model(robot, s.environment), MotionGraph(roadmap),
+                            transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
+                            np.random.default_rng(0), False)
+
+    q = dg.q_place[0]
+    opened = planner_for(scene).opened(b, p.release, True)
+    reached = q.copy()
+    reached[robot.hand_idx[b.arm]] = opened
+    block = np.eye(4)
+    block[:3, 3] = tip(reached)
+    blocked = dataclasses.replace(scene, environment=scene.environment + (Obstacle("block", "box", (0.015, 0.015, 0.015), block),))
+    planner = planner_for(blocked)
+    situation = Situation(None, scene.object_final, fingertip_geometries(planner.cm, b.arm, b.touching))
+    values = planner.letting_go(b, q, situation)
+    hand = robot.hand_idx[b.arm]
+    at = np.isin(hand, idx)
+    assert not np.allclose(values[at], opened[at]), "the blocked finger opened into the block"
+    assert np.allclose(values[~at], opened[~at]), "the other fingers did not open by the release fraction"
+    oracle = Oracle(blocked)
+    end = q.copy()
+    end[hand] = values
+    for s in np.linspace(0.0, 1.0, 50):
+        hits = [h for h in oracle.collisions(q + s * (end - q), scene.object_final, None, b.arm, False) if "block" in h]
+        assert not hits, f"the opening finger hits the block at s={s:.2f}: {hits}"
