@@ -176,26 +176,33 @@ class PhasePlanner:
                 continue
             yield path
 
-    def shaped(self, grasp: HandGrasp, groups: list[Iterator[np.ndarray]], situation: Situation) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    def shaped(self, grasp: HandGrasp, groups: list[Iterator[np.ndarray]], situation: Situation,
+               closing: Situation) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """(pre-shape, approach path reversed with the fingers in it) candidates, group by group (see retreats): each
         retreat with the fingers shaped for it (see preshape)."""
         for group in groups:
             for path in group:
-                pre = self.preshape(grasp, path, situation)
+                pre = self.preshape(grasp, path, situation, closing)
                 yield pre, np.array([self.with_fingers(q, grasp.arm, pre) for q in path])
 
-    def preshape(self, grasp: HandGrasp, path: np.ndarray, situation: Situation) -> np.ndarray:
-        """Finger values for approaching along a retreat path (reversed): open by the pre-shape fraction; a finger the
-        approach makes collide is tried wide open (its spreading joint too: an opposed thumb, opened only at its flexing
-        joints, can reach across the object), then open by half, a fifth, not at all (see per_finger)."""
-        levels = [self.opened(grasp, self.p.preshape), self.open[self.robot.hand_idx[grasp.arm]]] + [
+    def preshape(self, grasp: HandGrasp, path: np.ndarray, situation: Situation, closing: Situation) -> np.ndarray:
+        """Finger values for shaping the open hand at the pre-grasp, approaching along a retreat path (reversed) and
+        closing from there (in the `closing` situation, the touching fingertips allowed): open by the pre-shape fraction;
+        a finger the shaping, the approach or the closing makes collide is tried wide open (its spreading joint too: an
+        opposed thumb, opened only at its flexing joints, can reach across the object), then open by half, a fifth, not
+        at all (see per_finger)."""
+        open_hand = self.open[self.robot.hand_idx[grasp.arm]]
+        levels = [self.opened(grasp, self.p.preshape), open_hand] + [
             self.opened(grasp, f) for f in (0.5 * self.p.preshape, 0.2 * self.p.preshape)] + [grasp.fingers]
 
         def collisions(pre: np.ndarray) -> list[tuple[str, str]]:
             approach = np.array([self.with_fingers(q, grasp.arm, pre) for q in path])[::-1]
             validity = self.validity(self.model(situation, approach[0], np.flatnonzero(np.ptp(approach, axis=0) > 0)),
                                      self.contact_profile)
-            return [] if validity.path_valid(approach) else validity.first_collision(approach)
+            if not validity.path_valid(approach):
+                return validity.first_collision(approach)
+            shaping = self.finger_collisions(self.with_fingers(approach[0], grasp.arm, open_hand), grasp.arm, pre, situation)
+            return shaping or self.finger_collisions(approach[-1], grasp.arm, grasp.fingers, closing)
 
         return self.per_finger(grasp, levels, collisions)
 
@@ -203,16 +210,7 @@ class PhasePlanner:
         """Finger values letting go of the object held at q: the touching fingers open by the release fraction; one the
         opening makes collide (a thumb extending into the support) opens by half, a fifth, or stays (see per_finger)."""
         levels = [self.opened(grasp, f * self.p.release, True) for f in (1.0, 0.5, 0.2)] + [grasp.fingers]
-        hand = self.robot.hand_idx[grasp.arm]
-
-        def collisions(values: np.ndarray) -> list[tuple[str, str]]:
-            path = np.stack([q, self.with_fingers(q, grasp.arm, values)])
-            if np.allclose(path[0], path[1]):
-                return []
-            validity = self.validity(self.model(situation, q, hand), self.contact_profile)
-            return [] if validity.path_valid(path) else validity.first_collision(path)
-
-        return self.per_finger(grasp, levels, collisions)
+        return self.per_finger(grasp, levels, lambda values: self.finger_collisions(q, grasp.arm, values, situation))
 
     def per_finger(self, grasp: HandGrasp, levels: list[np.ndarray], collisions: Callable[[np.ndarray], list]) -> np.ndarray:
         """Finger values with each finger at one of `levels` (hand values, in order of preference): all start at the
@@ -316,10 +314,10 @@ class PhasePlanner:
             raise PieceFailed(phase, part, lambda: f"collides ({_pairs(validity.first_collision(path))})")
         return Piece(phase, part, np.asarray(path), situation, hand)
 
-    def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
-        """The hand's fingers moving to `values` (nothing when they are there): all joints at once, else each finger's
-        last joint first, else last (a finger curling onto a rounded surface sweeps its middle link through it when
-        its joints move together); the first valid, or the all-at-once motion's failure."""
+    def finger_motions(self, q: np.ndarray, arm: str, values: np.ndarray) -> list[np.ndarray]:
+        """Ways for the hand's fingers to move from q to `values`: all joints at once, else each finger's last joint
+        first, else last (a finger curling onto a rounded surface sweeps its middle link through it when its joints
+        move together). Nothing when they are there."""
         target = self.with_fingers(q, arm, values)
         if np.allclose(target, q):
             return []
@@ -330,13 +328,27 @@ class PhasePlanner:
             middle[first] = target[first]
             if not (np.allclose(middle, q) or np.allclose(middle, target)):
                 paths.append(np.stack([q, middle, target]))
+        return paths
+
+    def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
+        """The hand's fingers moving to `values`: the first valid of finger_motions, or the all-at-once motion's failure."""
         failure = None
-        for path in paths:
+        for path in self.finger_motions(q, arm, values):
             try:
                 return [self.contact(phase, part, path, situation, arm)]
             except PieceFailed as exc:
                 failure = failure or exc
-        raise failure
+        if failure is not None:
+            raise failure
+        return []
+
+    def finger_collisions(self, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[tuple[str, str]]:
+        """The colliding pairs of the fingers' motion from q to `values` (see finger_motions); empty when one is valid."""
+        paths = self.finger_motions(q, arm, values)
+        if not paths:
+            return []
+        validity = self.validity(self.model(situation, q, self.robot.hand_idx[arm]), self.contact_profile)
+        return [] if any(validity.path_valid(path) for path in paths) else validity.first_collision(paths[0])
 
     def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, arm: str | None = None) -> Piece:
         """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline);
@@ -402,6 +414,7 @@ class PhasePlanner:
         tips_a = fingertip_geometries(self.cm, a.arm, a.touching)
         tips_b = fingertip_geometries(self.cm, b.arm, b.touching)
         support_i, support_f = self.supports(oi), self.supports(of)
+        closing_a, closing_b = Situation(None, oi, tips_a), Situation(a.arm, g_a, tips_b)
 
         # Grasp: (pre-grasp, pre-shape + approach + closing) candidates
         def grasp(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
@@ -409,11 +422,12 @@ class PhasePlanner:
             q_pre = self.with_fingers(approach[0], a.arm, open_a)
             out = [self.contact(0, "approach", approach, static_i, a.arm)]
             out = self.fingers(0, "pre-shape", q_pre, a.arm, pre_a, static_i) + out
-            out += self.fingers(0, "closing", approach[-1], a.arm, a.fingers, Situation(None, oi, tips_a))
+            out += self.fingers(0, "closing", approach[-1], a.arm, a.fingers, closing_a)
             self.ready(q_pre, static_i, 0, "pre-grasp")
             return q_pre, out
 
-        grasps = self.options(0, "pre-grasp", self.shaped(a, self.retreats(q_grasp, a.arm, None, True, 0, "pre-grasp"), static_i), grasp)
+        approaches = self.shaped(a, self.retreats(q_grasp, a.arm, None, True, 0, "pre-grasp"), static_i, closing_a)
+        grasps = self.options(0, "pre-grasp", approaches, grasp)
         first_grasp = next(grasps)
 
         # Carry: the lift, (exchange pre-grasp, its approach and closing) candidates, the picking hand letting go and retreating
@@ -430,7 +444,7 @@ class PhasePlanner:
             q_pre_b = self.with_fingers(approach_b[0], b.arm, open_b)
             out = [self.contact(1, "approach", approach_b, held_a, b.arm)]
             out = self.fingers(1, "pre-shape", q_pre_b, b.arm, pre_b, held_a) + out
-            out += self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, Situation(a.arm, g_a, tips_b))
+            out += self.fingers(1, "closing", approach_b[-1], b.arm, b.fingers, closing_b)
             self.ready(q_pre_b, held_a, 1, "exchange pre-grasp")
             return q_pre_b, out
 
@@ -443,7 +457,7 @@ class PhasePlanner:
 
         if not direct:  # the placing hand's exchange pre-grasp, approach and closing; the picking hand letting go
             backoffs = self.retreats(q_x, b.arm, a.arm, False, 1, "exchange pre-grasp")
-            exchanges = self.options(1, "exchange pre-grasp", self.shaped(b, backoffs, held_a), exchange)
+            exchanges = self.options(1, "exchange pre-grasp", self.shaped(b, backoffs, held_a, closing_b), exchange)
             first_exchange = next(exchanges)
             released = Situation(b.arm, g_b, tips_a)
             q_both = self.with_fingers(q_x, b.arm, b.fingers)
