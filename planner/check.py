@@ -177,6 +177,7 @@ def check_task(scene: Scene, cm: CollisionModel | None = None, params: ArmsParam
         "robot-environment": len(cm.subsets["env"]),
         "disabled: adjacent links": cm.pair_set.adjacent,
         "disabled: touching at rest": cm.pair_set.at_rest,
+        "disabled: allowed by the robot spec": cm.pair_set.allowed,
         "pruned: never within margin": cm.pair_set.pruned,
     }
     v = validate_task(scene, cm)

@@ -1,8 +1,8 @@
 """Fast collision checking of the robot against itself and the environment (pinocchio + coal).
 
 Geometry: each link mesh is replaced by its convex hull, which contains it (primitives are kept). Pairs: adjacent links, links on one
-joint and pairs colliding at the rest configuration are disabled (as MoveIt's setup assistant
-does); pairs never within `prune_margin` over `prune_samples` uniform samples are pruned. The pair
+joint, pairs colliding at the rest configuration (as MoveIt's setup assistant does) and link pairs the robot spec allows to
+touch (`allowed_collisions`, as an SRDF's disable_collisions) are disabled; pairs never within `prune_margin` over `prune_samples` uniform samples are pruned. The pair
 set is computed once per robot spec and cached. Pairs between the two arms (hands included) are
 never pruned: the arms share a workspace, and uniform samples rarely bring the hands together. Robot-obstacle pairs collide within
 `env_padding` (a security margin, which the broad phase inflates its boxes by).
@@ -29,7 +29,7 @@ from .results import atomic_write_text
 from .robot import Robot
 from .user_cache import cache_path, read_cached
 
-CODE_VERSION = "pairs-2"
+CODE_VERSION = "pairs-3"
 
 
 @dataclass(frozen=True)
@@ -52,15 +52,17 @@ class PairSet:
     adjacent: int
     at_rest: int
     pruned: int
+    allowed: int  # pairs of links the robot spec allows to touch (allowed_collisions)
 
     def to_json(self) -> str:
-        return json.dumps({"kept": self.kept, "adjacent": self.adjacent, "at_rest": self.at_rest, "pruned": self.pruned})
+        return json.dumps({"kept": self.kept, "adjacent": self.adjacent, "at_rest": self.at_rest, "pruned": self.pruned,
+                           "allowed": self.allowed})
 
     @staticmethod
     def from_json(text: str) -> "PairSet":
         d = json.loads(text)
         kept = tuple(tuple(p) for p in d["kept"])
-        counts = (d["adjacent"], d["at_rest"], d["pruned"])
+        counts = (d["adjacent"], d["at_rest"], d["pruned"], d["allowed"])
         if not all(len(p) == 2 and all(isinstance(n, str) for n in p) for p in kept) or not all(type(c) is int for c in counts):
             raise ValueError("expected 'kept' as pairs of geometry names and integer counts")
         return PairSet(kept, *counts)
@@ -95,19 +97,30 @@ def geometry_part(robot: Robot, gm: pin.GeometryModel, index: int) -> str:
     return "torso"
 
 
-def _candidate_pairs(robot: Robot, gm: pin.GeometryModel) -> tuple[list[tuple[int, int]], int]:
-    """All pairs of robot geometries on different, non-adjacent joints (and not both on the base)."""
+def geometry_link(name: str) -> str:
+    """The URDF link of a geometry pinocchio named '<link>_<k>'."""
+    link, _, k = name.rpartition("_")
+    return link if k.isdigit() else name
+
+
+def _candidate_pairs(robot: Robot, gm: pin.GeometryModel) -> tuple[list[tuple[int, int]], int, int]:
+    """(pairs, adjacent, allowed): all pairs of robot geometries on different, non-adjacent joints (and not both on the
+    base) whose links the spec does not allow to touch; how many pairs each rule disabled."""
     parents = robot.model.parents
-    out, adjacent = [], 0
+    allowed_links = {frozenset(p) for p in robot.spec.allowed_collisions}
+    links = [geometry_link(o.name) for o in gm.geometryObjects]
+    out, adjacent, allowed = [], 0, 0
     n = len(gm.geometryObjects)
     for i in range(n):
         for j in range(i + 1, n):
             a, b = gm.geometryObjects[i].parentJoint, gm.geometryObjects[j].parentJoint
             if a == b or parents[a] == b or parents[b] == a:
                 adjacent += 1
+            elif frozenset((links[i], links[j])) in allowed_links:
+                allowed += 1
             else:
                 out.append((i, j))
-    return out, adjacent
+    return out, adjacent, allowed
 
 
 def _pair_cache_key(robot: Robot, params: CollisionParams) -> str:
@@ -121,7 +134,7 @@ def _pair_cache_key(robot: Robot, params: CollisionParams) -> str:
 
 def compute_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParams) -> PairSet:
     """Sample the robot to find the self-collision pairs worth checking (see module docstring)."""
-    pairs, adjacent = _candidate_pairs(robot, gm)
+    pairs, adjacent, allowed = _candidate_pairs(robot, gm)
     work = gm.copy()
     work.removeAllCollisionPairs()
     for i, j in pairs:
@@ -151,7 +164,7 @@ def compute_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParam
             undecided = np.setdiff1d(undecided, hit)
     names = [o.name for o in gm.geometryObjects]
     kept = tuple((names[i], names[j]) for (i, j), k in zip(pairs, near) if k)
-    return PairSet(kept, adjacent, int(at_rest.sum()), int((~near & ~at_rest).sum()))
+    return PairSet(kept, adjacent, int(at_rest.sum()), int((~near & ~at_rest).sum()), allowed)
 
 
 def robot_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParams, use_cache: bool = True) -> PairSet:

@@ -249,6 +249,10 @@ def build_robot(spec: RobotSpec) -> Robot:
             raise InputError(spec.source, f"arms.{arm.name}.hand.palm_frame", f"no frame '{arm.hand.palm_frame}' in {arm.hand.urdf.name}")
         if not model.existFrame(arm.shoulder_frame):
             raise InputError(spec.source, f"arms.{arm.name}.shoulder_frame", f"no frame '{arm.shoulder_frame}' in the body URDF")
+    for pair in spec.allowed_collisions:
+        for link in pair:
+            if not model.existFrame(link):
+                raise InputError(spec.source, "body.allowed_collisions", f"link '{link}' is not in the composed robot")
     listed = [("body.torso_joints", torso_idx)] + [(f"arms.{a}.joints", i) for a, i in arm_idx.items()]
     listed += [(f"arms.{a}.hand.fingers", i) for a, i in hand_idx.items()]
     owner: dict[int, str] = {}

@@ -70,6 +70,7 @@ class RobotSpec:
     base_xyz: tuple[float, float, float]
     base_rpy: tuple[float, float, float]
     drop_geometry: tuple[str, ...]
+    allowed_collisions: tuple[tuple[str, str], ...]  # link pairs never checked against each other (as an SRDF's disable_collisions)
     locked_joints: tuple[tuple[str, float], ...]
     torso_joints: tuple[str, ...]
     torso_rest: tuple[float, ...]
@@ -166,7 +167,8 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     root = Table(load_toml(path), path)
     root.check_keys({"name", "description", "body", "arms"})
     body = root.table("body")
-    body.check_keys({"urdf", "base_xyz", "base_rpy", "drop_geometry", "locked_joints", "torso_joints", "torso_rest"})
+    body.check_keys({"urdf", "base_xyz", "base_rpy", "drop_geometry", "allowed_collisions", "locked_joints", "torso_joints",
+                     "torso_rest"})
     torso = tuple(body.str_list("torso_joints", default=[]))
     arms_tab = root.table("arms")
     arms = tuple(_arm(_arm_name(name, arms_tab), arms_tab.table(name), path.parent) for name in arms_tab.data)
@@ -180,6 +182,7 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
         base_xyz=_triple(body, "base_xyz"),
         base_rpy=_triple(body, "base_rpy"),
         drop_geometry=tuple(body.str_list("drop_geometry", default=[])),
+        allowed_collisions=tuple(body.name_pairs("allowed_collisions")),
         locked_joints=tuple(sorted(body.number_map("locked_joints", default={}).items())),
         torso_joints=torso,
         torso_rest=tuple(body.vector("torso_rest", len(torso), default=[0.0] * len(torso)).tolist()),

@@ -92,6 +92,14 @@ class Table:
             raise self.error(key, "expected a list of names (strings)")
         return list(value)
 
+    def name_pairs(self, key: str) -> list[tuple[str, str]]:
+        """A list of two-name lists, e.g. [["a", "b"], ["c", "d"]] (empty when absent)."""
+        value = self._get(key, [])
+        if not isinstance(value, list) or not all(
+                isinstance(v, list) and len(v) == 2 and all(isinstance(n, str) and n for n in v) for v in value):
+            raise self.error(key, 'expected a list of name pairs, e.g. [["link_a", "link_b"]]')
+        return [(a, b) for a, b in value]
+
     def vector(self, key: str, length: int | None = None, default: Any = None) -> np.ndarray:
         value = self._get(key, _REQUIRED if default is None else default)
         ok = isinstance(value, list) and all(

@@ -17,7 +17,7 @@ def _full_mesh_model(scene, cm):
     robot = scene.robot
     gm = robot.collision_model.copy()
     n_robot = len(gm.geometryObjects)
-    pairs, _ = _candidate_pairs(robot, gm)
+    pairs, _, _ = _candidate_pairs(robot, gm)
     names = [o.name for o in gm.geometryObjects]
     data, gd = robot.model.createData(), None
     gm.removeAllCollisionPairs()
@@ -64,7 +64,7 @@ def test_pruned_pairs_never_collide_on_fresh_samples(default_scene, default_coll
     """The pairs pruned by sampling collide in none of 3,000 fresh uniform samples (other seed)."""
     robot = default_scene.robot
     gm = simplified_robot_geometry(robot)
-    pairs, _ = _candidate_pairs(robot, gm)
+    pairs, _, _ = _candidate_pairs(robot, gm)
     names = [o.name for o in gm.geometryObjects]
     kept = set(default_collision.pair_set.kept)
     gm.removeAllCollisionPairs()
@@ -141,3 +141,21 @@ def test_environment_padding(default_scene):
         cm = build_collision_model(robot, (wall,), CollisionParams(env_padding=0.01))
         results[gap] = cm.checker().in_collision(robot.q_rest)
     assert results == {0.005: True, 0.03: False}
+
+
+def test_pairs_the_robot_spec_allows_are_never_checked():
+    """Baxter's spec allows each upper-arm cover to touch its forearm (the cover's cylinder reaches past the elbow): no
+    such pair is a candidate, and the count says how many were left out."""
+    from planner.collision import geometry_link
+    from planner.robot import load_robot
+    from planner.robot_spec import load_robot_spec
+
+    robot = load_robot(load_robot_spec("baxter_allegro.toml").source)
+    gm = simplified_robot_geometry(robot)
+    pairs, _, allowed = _candidate_pairs(robot, gm)
+    links = [geometry_link(o.name) for o in gm.geometryObjects]
+    allowed_links = {frozenset(p) for p in robot.spec.allowed_collisions}
+    assert allowed_links and allowed == 2
+    assert not any(frozenset((links[i], links[j])) in allowed_links for i, j in pairs)
+    elbow = links.index("left_upper_elbow_visual")
+    assert any(elbow in pair for pair in pairs), "the cover is still checked against everything else"

@@ -363,6 +363,17 @@ def test_arm_joint_not_in_urdf(tmp_path, light):
     check(err, path, "arms.left.joints", "joint 'LeftElbowPich' is not in the composed robot")
 
 
+def test_allowed_collision_link_not_in_urdf(tmp_path, light):
+    err, path = build_error(tmp_path, edit(light, ("set", "body.allowed_collisions", [["Torso", "LeftElbowLink"]])))
+    check(err, path, "body.allowed_collisions", "link 'LeftElbowLink' is not in the composed robot")
+
+
+@pytest.mark.parametrize("value", [["Torso", "Head"], [["Torso"]], [["Torso", 3]], "Torso"])
+def test_allowed_collisions_must_be_name_pairs(tmp_path, value):
+    err, path = spec_error(tmp_path, edit(SPEC, ("set", "body.allowed_collisions", value)))
+    check(err, path, "body.allowed_collisions", "expected a list of name pairs")
+
+
 def test_finger_joint_not_in_urdf(tmp_path):
     err, path = build_error(tmp_path, edit(SPEC, ("set", f"{FINGER0}.joints[2]", "joint_2.5")))
     check(err, path, "arms.right.hand.fingers", "joint_2.5", "is not in the composed robot")

@@ -13,8 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import (CHANGED, EXAMPLE, VIEWPORT, _free_port, _open, _settled, _until_changed, _view,
-                                    _wait_for)
+from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _free_port, _open, _settled, _until_changed, _view, _wait_for
 
 from planner.errors import RegraspError
 from planner.paths import DEFAULT_TASK
