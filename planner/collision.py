@@ -1,12 +1,14 @@
 """Fast collision checking of the robot against itself and the environment (pinocchio + coal).
 
-Geometry: each link mesh is replaced by its convex hull, which contains it (primitives are kept). Pairs: adjacent links, links on one
-joint, pairs colliding at the rest configuration (as MoveIt's setup assistant does) and link pairs the robot spec allows to
-touch (`allowed_collisions`, as an SRDF's disable_collisions) are disabled; pairs never within `prune_margin` over `prune_samples` uniform samples are pruned. The pair
-set is computed once per robot spec and cached. Pairs between the two arms (hands included) are
-never pruned: the arms share a workspace, and uniform samples rarely bring the hands together. Robot-obstacle pairs collide within
-`env_padding` (a security margin, which the broad phase inflates its boxes by).
-A check runs pinocchio's sweep-and-prune (SSaP) broad phase over the pairs of the requested subset
+Geometry: each link mesh is replaced by its convex hull, which contains it (primitives are kept).
+Pairs: adjacent links, links on one joint, pairs colliding at the rest configuration (as MoveIt's
+setup assistant does) and link pairs the robot spec allows to touch (`allowed_collisions`, as an
+SRDF's disable_collisions) are disabled; pairs never within `prune_margin` over `prune_samples`
+uniform samples are pruned. The pair set is computed once per robot spec and cached. Pairs between
+the two arms (hands included) are never pruned: the arms share a workspace, and uniform samples
+rarely bring the hands together. Robot-obstacle pairs collide within `env_padding` (a security
+margin, which the broad phase inflates its boxes by). A check runs pinocchio's sweep-and-prune
+(SSaP) broad phase over the pairs of the requested subset
 (measured faster here than its dynamic AABB tree).
 """
 from __future__ import annotations

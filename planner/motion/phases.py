@@ -374,9 +374,11 @@ class PhasePlanner:
                 path = rrt_transit(space, full, near, q_start, q_goal, limit, self.rng, stats)
             elif self.baseline:
                 path = rrt_transit(space, full, near, q_start, q_goal, self.transit_params, self.rng, stats)
-            else:
-                path = LazyTransit(self.graph, space, full.on("changed"), full, near, self.transit_params, self.rng,
-                                   stats).query(q_start, q_goal)
+            else:  # a phase's queries share its RRT budget: once spent, they search the graph only
+                left = max(0, self.p.phase_reconnections - stats.rrt_calls)
+                params = dataclasses.replace(self.transit_params,
+                                             max_reconnections=min(left, self.transit_params.max_reconnections))
+                path = LazyTransit(self.graph, space, full.on("changed"), full, near, params, self.rng, stats).query(q_start, q_goal)
         except TransitFailed as exc:
             raise PieceFailed(phase, part, str(exc)) from exc
         t = time.perf_counter()

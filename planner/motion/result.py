@@ -27,7 +27,9 @@ class MotionParams:
     connections: int = 4  # transit: valid edges joining each end to the graph (nearest nodes first) ...
     max_connections: int = 48  # ... among at most this many nearest nodes tried
     max_searches: int = 60  # transit: graph searches after invalidations before reconnecting
-    max_reconnections: int = 2  # transit: RRTConnect calls per query (then the next candidate end is tried)
+    max_reconnections: int = 2  # transit: RRTConnect calls per query (then the next candidate end is tried) ...
+    phase_reconnections: int = 4  # ... and per phase, over all its queries (then they search the graph only: a double
+    # grasp whose transit cannot be found gives up after a few seconds instead of reconnecting to every candidate end)
     reconnect_motions: int = 1000  # motion checks one RRTConnect reconnection may make (a budget in checks, unlike one in
     # seconds, gives the same result on any machine)
     rrt_motions: int = 20000  # motion checks one RRTConnect query of the baseline planner ('rrt') may make
