@@ -10,6 +10,7 @@ hand spec and URDF, the mesh, the parameters, the seed and the code version.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import os
 from dataclasses import dataclass
 from typing import Any
@@ -59,6 +60,8 @@ class GraspParams:
     w_ellipsoid: float = 0.25
     w_curvature: float = 0.25
     dedup_distance: float = 0.01  # m: grasps whose contacts are all this close (same fingers) are one grasp
+    min_clear: int = 30  # grasps clear of the obstacles at the hand's placement, at least; with fewer (an object lying
+    densify: int = 3  # flat keeps only its grasps from above), the list is searched again with this many times the orientations
 
     def workspace(self) -> WorkspaceParams:
         return WorkspaceParams(self.limit_margin, self.samples_per_joint, self.voxel, self.max_spheres, self.min_radius)
@@ -260,10 +263,30 @@ def session_grasp_seed(session_seed: int) -> int:
     return seed_of(np.random.default_rng(step_seed(session_seed, SEED_NAME)))
 
 
+def clear_count(robot, grasps: GraspList, object_pose: np.ndarray, environment) -> int:
+    """How many grasps of a list keep the hand clear of the obstacles (by the collision model's padding) with the
+    object at a pose: those the grasp configurations step goes on with."""
+    from .collision import CollisionParams
+    from .grasp_configs import environment_filter
+    from .hand_placement import ObstacleTest
+
+    obstacles = ObstacleTest.of_environment(environment, CollisionParams().env_padding)
+    return int(environment_filter(robot, grasps, object_pose, obstacles).sum())
+
+
 def _step_run(role: str) -> Any:
     def run(ctx: StepContext) -> StepOutput:
+        scene, p, seed = ctx.scene, ctx.params, seed_of(ctx.rng)
         arm = getattr(ctx.inputs["arms"], f"{role}_arm")
-        return StepOutput(grasp_list(ctx.scene.robot.spec, arm, ctx.scene.object_mesh, ctx.params, seed_of(ctx.rng), ctx.progress)[0])
+        grasps = grasp_list(scene.robot.spec, arm, scene.object_mesh, p, seed, ctx.progress)[0]
+        pose = scene.object_initial if role == "picking" else scene.object_final
+        clear = clear_count(scene.robot, grasps, pose, scene.environment)
+        if clear < p.min_clear and p.densify > 1:
+            ctx.progress(0.0, f"{clear} of {len(grasps)} grasps clear the obstacles at the placement (fewer than {p.min_clear}): "
+                              f"searching {p.densify} times the orientations")
+            grasps = grasp_list(scene.robot.spec, arm, scene.object_mesh, dataclasses.replace(p, orientations=p.orientations * p.densify),
+                                seed, ctx.progress)[0]
+        return StepOutput(grasps)
 
     run.__doc__ = f"The {role} hand's grasp list (paper IV-A)."
     return run

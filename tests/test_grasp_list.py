@@ -210,3 +210,20 @@ def test_default_lists_have_50_force_closed_grasps(tmp_path, hand):
     subprocess.run([sys.executable, "-m", "workbench.cli", "grasps", "--hand", hand, "--no-cache", "--json", str(out)], check=True)
     data = json.loads(out.read_text())
     assert data["outcomes"]["closed"] >= 50 and len(data["grasps"]) >= 50  # time: see `regrasp grasps`, not a test
+
+
+@pytest.mark.parametrize("min_clear, densified", [(10**6, True), (0, False)])
+def test_few_grasps_clear_of_the_support_make_the_step_search_denser(tmp_path, min_clear, densified):
+    """The place step counts its list's grasps clear of the obstacles at the final placement and, with fewer than
+    `min_clear`, searches again with `densify` times the orientations (a small search keeps the test quick)."""
+    from planner.runner import run_pipeline
+    from planner.session import Session
+    from planner.task import load_task
+
+    small = {"positions": 16, "orientations": 8, "min_clear": min_clear, "densify": 3}
+    session = Session.create(tmp_path / "s", load_task("default"), 0)
+    run_pipeline(session, "place_grasps", {"place_grasps": small, "pick_grasps": small}, warn=lambda message: None)
+    place = session.result("place_grasps")
+    base = grasp_list(session.scene.robot.spec, place.hand, session.scene.object_mesh,
+                      GraspParams(positions=16, orientations=8, min_clear=min_clear), 12345)[0]
+    assert place.frames_tried == (3 if densified else 1) * base.frames_tried
