@@ -235,7 +235,8 @@ def grasp_list(spec: RobotSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams,
                use_cache: bool = True, workers: int | None = None) -> tuple[GraspList, bool]:
     """One hand's grasp list from the user cache, else computed (and cached); also whether it came from the cache."""
     hand = hand_spec_of(spec, arm)
-    key = cache_key(CODE_VERSION, repr(hand), hand.urdf.read_bytes(), mesh_bytes(mesh), repr(p), str(seed), arm)
+    searched = dataclasses.replace(p, min_clear=GraspParams.min_clear, densify=GraspParams.densify)  # not the list's
+    key = cache_key(CODE_VERSION, repr(hand), hand.urdf.read_bytes(), mesh_bytes(mesh), repr(searched), str(seed), arm)
     folder = cache_path("grasps", key)
     with computing(folder):
         if use_cache:
