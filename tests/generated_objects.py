@@ -23,8 +23,9 @@ TASK_TEXT_ROBOT = DEFAULT_TASK.read_text().replace(f'robot = "{ROBOT}"', f'robot
 SUCCESS_RATE = 0.85  # issue 13: at least this fraction of (object, placement) pairs reach double grasps
 
 
-# Compact or flat objects (a 10 cm cube, a squat cylinder, a 4 cm thick torus lying flat) mostly fail: on the desk
-# only grasps from above are clear of it (fingertips kept 1 cm off), and two Allegro hands from above do not fit on them.
+# On the desk only grasps from above are clear of it (fingertips kept 1 cm off): an object lying flat keeps few of them,
+# and the grasp steps search it again with more orientations (GraspParams.min_clear). Two Allegro hands still do not fit
+# together on a compact object (a 10 cm cube, a squat cylinder).
 OBJECTS: dict[str, tuple[str, dict]] = {  # name -> (shape in planner/shapes.py, its parameters)
     "box_long": ("box", {"size": (0.22, 0.06, 0.07)}),
     "box_tall": ("box", {"size": (0.08, 0.08, 0.18)}),
