@@ -319,3 +319,43 @@ def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
     for s in np.linspace(0.0, 1.0, 50):
         hits = [h for h in oracle.collisions(q + s * (end - q), scene.object_final, None, b.arm, False) if "block" in h]
         assert not hits, f"the opening finger hits the block at s={s:.2f}: {hits}"
+
+
+def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(example):
+    """The ways a hand's fingers close: all joints at once first; among the others, one moving every finger's joints one
+    depth at a time from the tip to the base and one from the base to the tip (a finger curling onto a rounded surface
+    hooks its tip first); every way starts at q and ends at the target, and no two are the same."""
+    from planner.collision import build_collision_model
+    from planner.motion.graph import MotionGraph
+    from planner.motion.phases import PhasePlanner
+    from planner.motion.step import contact_profile
+    from planner.motion.validity import transit_profile
+
+    scene, roadmap, _ = example
+    robot, p = scene.robot, MotionParams()
+    planner = PhasePlanner(scene, build_collision_model(robot, scene.environment), MotionGraph(roadmap),
+                           transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
+                           np.random.default_rng(0), False)
+    arm = robot.spec.arm_names[0]
+    hand, fingers = robot.hand_idx[arm], list(robot.finger_idx[arm].values())
+    q = robot.q_rest.copy()
+    target = robot.lower[hand] + 0.5 * (robot.upper[hand] - robot.lower[hand])
+    paths = planner.finger_motions(q, arm, target)
+    assert len(paths[0]) == 2, "the first way is not all joints at once"
+    for path in paths:
+        assert np.allclose(path[0], q) and np.allclose(path[-1, hand], target)
+        assert np.allclose(np.delete(path, hand, axis=1), np.delete(q, hand)), "a joint outside the hand moved"
+    assert len({path.round(9).tobytes() for path in paths}) == len(paths), "the same way offered twice"
+    depth = max(len(idx) for idx in fingers)
+
+    def moved_depths(path):
+        """Per step of a path, the depths (0: a finger's last joint) of the hand joints it moves."""
+        out = []
+        for a, b in zip(path[:-1], path[1:]):
+            out.append({len(idx) - 1 - k for idx in fingers for k, j in enumerate(idx) if not np.isclose(a[j], b[j])})
+        return out
+
+    orders = [moved_depths(path) for path in paths]
+    assert [{d} for d in range(depth)] in orders, "no way closes one joint depth at a time from the tip"
+    assert [{d} for d in reversed(range(depth))] in orders, "no way closes one joint depth at a time from the base"
+    assert planner.finger_motions(q, arm, q[hand]) == [], "fingers already there moved"

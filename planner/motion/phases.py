@@ -316,18 +316,29 @@ class PhasePlanner:
 
     def finger_motions(self, q: np.ndarray, arm: str, values: np.ndarray) -> list[np.ndarray]:
         """Ways for the hand's fingers to move from q to `values`: all joints at once, else each finger's last joint
-        first, else last (a finger curling onto a rounded surface sweeps its middle link through it when its joints
-        move together). Nothing when they are there."""
+        first, else last, else one joint after the other from the tip to the base, else from the base to the tip (a
+        finger curling onto a rounded surface sweeps its middle link through it when its joints move together; hooking
+        its tip first keeps it outside). Nothing when they are there."""
         target = self.with_fingers(q, arm, values)
         if np.allclose(target, q):
             return []
-        last = np.array([idx[-1] for idx in self.robot.finger_idx[arm].values()])
+        fingers = list(self.robot.finger_idx[arm].values())
+        last = np.array([idx[-1] for idx in fingers])
+        depth = max(len(idx) for idx in fingers)
+        by_joint = [np.array([idx[-1 - k] for idx in fingers if k < len(idx)]) for k in range(depth)]  # tip first
+        orders = [[last], [np.setdiff1d(self.robot.hand_idx[arm], last)], by_joint, by_joint[::-1]]
         paths = [np.stack([q, target])]
-        for first in (last, np.setdiff1d(self.robot.hand_idx[arm], last)):
-            middle = q.copy()
-            middle[first] = target[first]
-            if not (np.allclose(middle, q) or np.allclose(middle, target)):
-                paths.append(np.stack([q, middle, target]))
+        for order in orders:
+            path = [q]
+            for joints in order:
+                step = path[-1].copy()
+                step[joints] = target[joints]
+                if not np.allclose(step, path[-1]):
+                    path.append(step)
+            if not np.allclose(path[-1], target):
+                path.append(target)
+            if len(path) > 2 and not any(len(path) == len(p) and np.allclose(path, p) for p in paths):
+                paths.append(np.stack(path))
         return paths
 
     def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
