@@ -359,3 +359,25 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     assert [{d} for d in range(depth)] in orders, "no way closes one joint depth at a time from the tip"
     assert [{d} for d in reversed(range(depth))] in orders, "no way closes one joint depth at a time from the base"
     assert planner.finger_motions(q, arm, q[hand]) == [], "fingers already there moved"
+
+    # a hand where one finger must close from the tip to the base while another must close all at once: no hand-wide
+    # order fits both, the fingers one after the other do
+    names = list(robot.finger_idx[arm])
+    hook, whole = robot.finger_idx[arm][names[0]], robot.finger_idx[arm][names[1]]
+
+    class Rule:
+        """Valid: `hook` moves one joint at a time, tip before base; `whole` moves all its joints at once."""
+
+        def path_valid(self, path):
+            steps = list(zip(path[:-1], path[1:]))
+            if any(np.sum(~np.isclose(a[hook], b[hook])) > 1 for a, b in steps):
+                return False
+            if sum(not np.allclose(a[whole], b[whole]) for a, b in steps) > 1:
+                return False
+            order = [min(k for k in range(len(path) - 1) if not np.isclose(path[k, j], path[k + 1, j])) for j in hook
+                     if not np.isclose(path[0, j], path[-1, j])]
+            return order == sorted(order, reverse=True)
+
+    found = planner.finger_path(q, arm, target, Rule())
+    assert found is not None and Rule().path_valid(found), "no valid way found finger by finger"
+    assert np.allclose(found[0], q) and np.allclose(found[-1, hand], target)

@@ -314,52 +314,81 @@ class PhasePlanner:
             raise PieceFailed(phase, part, lambda: f"collides ({_pairs(validity.first_collision(path))})")
         return Piece(phase, part, np.asarray(path), situation, hand)
 
+    def finger_orders(self, fingers: list[np.ndarray]) -> list[list[np.ndarray]]:
+        """Ways for fingers (their joint indices) to move, as stages of joints moving together: all at once, else each
+        finger's last joint first, else last, else one joint depth after the other from the tip to the base, else from
+        the base to the tip (a finger curling onto a rounded surface sweeps its middle link through it when its joints
+        move together; hooking its tip first keeps it outside)."""
+        every = np.concatenate(fingers)
+        last = np.array([idx[-1] for idx in fingers])
+        rest = np.setdiff1d(every, last)
+        by_depth = [np.array([idx[-1 - k] for idx in fingers if k < len(idx)]) for k in range(max(map(len, fingers)))]
+        return [[every], [last, rest], [rest, last], by_depth, by_depth[::-1]]
+
+    @staticmethod
+    def staged(q: np.ndarray, target: np.ndarray, order: list[np.ndarray]) -> np.ndarray:
+        """The polyline from q moving each stage's joints to the target in turn (stages that move nothing dropped); the
+        stages cover every joint that differs."""
+        path = [q]
+        for joints in order:
+            step = path[-1].copy()
+            step[joints] = target[joints]
+            if not np.allclose(step, path[-1]):
+                path.append(step)
+        return np.array(path)
+
     def finger_motions(self, q: np.ndarray, arm: str, values: np.ndarray) -> list[np.ndarray]:
-        """Ways for the hand's fingers to move from q to `values`: all joints at once, else each finger's last joint
-        first, else last, else one joint after the other from the tip to the base, else from the base to the tip (a
-        finger curling onto a rounded surface sweeps its middle link through it when its joints move together; hooking
-        its tip first keeps it outside). Nothing when they are there."""
+        """The distinct polylines of the whole hand's fingers from q to `values` by finger_orders; nothing when they are
+        there."""
+        target = self.with_fingers(q, arm, values)
+        paths: list[np.ndarray] = []
+        for order in self.finger_orders(list(self.robot.finger_idx[arm].values())):
+            path = self.staged(q, target, order)
+            if len(path) > 1 and not any(path.shape == p.shape and np.allclose(path, p) for p in paths):
+                paths.append(path)
+        return paths
+
+    def finger_path(self, q: np.ndarray, arm: str, values: np.ndarray, validity: Validity) -> np.ndarray | None:
+        """A valid motion of the fingers from q to `values`: the first valid of finger_motions, else the fingers one
+        after the other, each the first valid of its own ways (the others where they are: a thumb closing all at once
+        beside a ring finger hooking its tip first); None when a finger has no valid way."""
+        paths = self.finger_motions(q, arm, values)
+        if not paths:
+            return q[None]
+        for path in paths:
+            if validity.path_valid(path):
+                return path
+        target = self.with_fingers(q, arm, values)
+        path = q[None]
+        for idx in self.robot.finger_idx[arm].values():
+            ways = [self.staged(path[-1], target, order) for order in self.finger_orders([idx])]
+            way = next((w for w in ways if len(w) == 1 or validity.path_valid(w)), None)
+            if way is None:
+                return None
+            path = np.concatenate([path, way[1:]])
+        return path
+
+    def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
+        """The hand's fingers moving to `values` (see finger_path), checked with the contact profile; PieceFailed naming
+        what the all-at-once motion hits when no way is valid."""
         target = self.with_fingers(q, arm, values)
         if np.allclose(target, q):
             return []
-        fingers = list(self.robot.finger_idx[arm].values())
-        last = np.array([idx[-1] for idx in fingers])
-        depth = max(len(idx) for idx in fingers)
-        by_joint = [np.array([idx[-1 - k] for idx in fingers if k < len(idx)]) for k in range(depth)]  # tip first
-        orders = [[last], [np.setdiff1d(self.robot.hand_idx[arm], last)], by_joint, by_joint[::-1]]
-        paths = [np.stack([q, target])]
-        for order in orders:
-            path = [q]
-            for joints in order:
-                step = path[-1].copy()
-                step[joints] = target[joints]
-                if not np.allclose(step, path[-1]):
-                    path.append(step)
-            if not np.allclose(path[-1], target):
-                path.append(target)
-            if len(path) > 2 and not any(len(path) == len(p) and np.allclose(path, p) for p in paths):
-                paths.append(np.stack(path))
-        return paths
-
-    def fingers(self, phase: int, part: str, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[Piece]:
-        """The hand's fingers moving to `values`: the first valid of finger_motions, or the all-at-once motion's failure."""
-        failure = None
-        for path in self.finger_motions(q, arm, values):
-            try:
-                return [self.contact(phase, part, path, situation, arm)]
-            except PieceFailed as exc:
-                failure = failure or exc
-        if failure is not None:
-            raise failure
-        return []
+        t = time.perf_counter()
+        validity = self.validity(self.model(situation, q, np.flatnonzero(target != q)), self.contact_profile)
+        path = self.finger_path(q, arm, values, validity)
+        self.stats[phase].seconds_contact += time.perf_counter() - t
+        if path is None:
+            raise PieceFailed(phase, part, lambda: f"collides ({_pairs(validity.first_collision(np.stack([q, target])))})")
+        return [Piece(phase, part, path, situation, arm)]
 
     def finger_collisions(self, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[tuple[str, str]]:
-        """The colliding pairs of the fingers' motion from q to `values` (see finger_motions); empty when one is valid."""
-        paths = self.finger_motions(q, arm, values)
-        if not paths:
-            return []
+        """The colliding pairs of the fingers' motion from q to `values` all at once; empty when a way is valid (see
+        finger_path)."""
         validity = self.validity(self.model(situation, q, self.robot.hand_idx[arm]), self.contact_profile)
-        return [] if any(validity.path_valid(path) for path in paths) else validity.first_collision(paths[0])
+        if self.finger_path(q, arm, values, validity) is not None:
+            return []
+        return validity.first_collision(np.stack([q, self.with_fingers(q, arm, values)]))
 
     def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, arm: str | None = None) -> Piece:
         """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline);
