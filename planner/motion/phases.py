@@ -105,6 +105,7 @@ class PhasePlanner:
         self.models: dict[tuple, CollisionModel] = {}
         self.validities: dict[tuple, Validity] = {}
         self.distances: dict[int, Clearances] = {}
+        self.checked: dict[tuple[int, bytes], bool] = {}  # see valid
         self.finger_names = {arm: self.finger_of_geometry(arm) for arm in robot.spec.arm_names}
 
     # ----- kinematics
@@ -199,7 +200,7 @@ class PhasePlanner:
             approach = np.array([self.with_fingers(q, grasp.arm, pre) for q in path])[::-1]
             validity = self.validity(self.model(situation, approach[0], np.flatnonzero(np.ptp(approach, axis=0) > 0)),
                                      self.contact_profile)
-            if not validity.path_valid(approach):
+            if not self.valid(validity, approach):
                 return validity.first_collision(approach)
             shaping = self.finger_collisions(self.with_fingers(approach[0], grasp.arm, open_hand), grasp.arm, pre, situation)
             return shaping or self.finger_collisions(approach[-1], grasp.arm, grasp.fingers, closing)
@@ -308,7 +309,7 @@ class PhasePlanner:
         t = time.perf_counter()
         moving = np.flatnonzero(np.ptp(path, axis=0) > 0)
         validity = self.validity(self.model(situation, path[0], moving), self.contact_profile)
-        ok = validity.path_valid(path)
+        ok = self.valid(validity, path)
         self.stats[phase].seconds_contact += time.perf_counter() - t
         if not ok:
             raise PieceFailed(phase, part, lambda: f"collides ({_pairs(validity.first_collision(path))})")
@@ -356,13 +357,13 @@ class PhasePlanner:
         if not paths:
             return q[None]
         for path in paths:
-            if validity.path_valid(path):
+            if self.valid(validity, path):
                 return path
         target = self.with_fingers(q, arm, values)
         path = q[None]
         for idx in self.robot.finger_idx[arm].values():
             ways = [self.staged(path[-1], target, order) for order in self.finger_orders([idx])]
-            way = next((w for w in ways if len(w) == 1 or validity.path_valid(w)), None)
+            way = next((w for w in ways if len(w) == 1 or self.valid(validity, w)), None)
             if way is None:
                 return None
             path = np.concatenate([path, way[1:]])
@@ -375,7 +376,7 @@ class PhasePlanner:
         if np.allclose(target, q):
             return []
         t = time.perf_counter()
-        validity = self.validity(self.model(situation, q, np.flatnonzero(target != q)), self.contact_profile)
+        validity = self.finger_validity(q, target, situation)
         path = self.finger_path(q, arm, values, validity)
         self.stats[phase].seconds_contact += time.perf_counter() - t
         if path is None:
@@ -385,10 +386,23 @@ class PhasePlanner:
     def finger_collisions(self, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[tuple[str, str]]:
         """The colliding pairs of the fingers' motion from q to `values` all at once; empty when a way is valid (see
         finger_path)."""
-        validity = self.validity(self.model(situation, q, self.robot.hand_idx[arm]), self.contact_profile)
+        target = self.with_fingers(q, arm, values)
+        validity = self.finger_validity(q, target, situation)
         if self.finger_path(q, arm, values, validity) is not None:
             return []
-        return validity.first_collision(np.stack([q, self.with_fingers(q, arm, values)]))
+        return validity.first_collision(np.stack([q, target]))
+
+    def finger_validity(self, q: np.ndarray, target: np.ndarray, situation: Situation) -> Validity:
+        """The contact validity of finger motions from q to target: over the pairs the joints that differ change."""
+        return self.validity(self.model(situation, q, np.flatnonzero(target != q)), self.contact_profile)
+
+    def valid(self, validity: Validity, path: np.ndarray) -> bool:
+        """validity.path_valid(path), checked once per plan: the pre-shape search checks the approach, shaping and
+        closing of each candidate, and the pieces built from the one it keeps are the same motions."""
+        key = (id(validity), path.tobytes())
+        if key not in self.checked:
+            self.checked[key] = validity.path_valid(path)
+        return self.checked[key]
 
     def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, arm: str | None = None) -> Piece:
         """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline);
