@@ -22,7 +22,7 @@ from .config_score import ConfigScorer, ScoreWeights
 from .forked import forked_map
 from .grasps import GraspList
 from .hand_model import load_hand_model
-from .hand_placement import ObstacleTest, posed_shapes
+from .hand_placement import ObstacleTest, environment_filter
 from .object_collision import ObjectCollision
 from .results import array
 from .robot import Robot
@@ -93,13 +93,6 @@ class GraspConfigs:
         return {"pick_env_free": int(self.pick_env_free.sum()), "place_env_free": int(self.place_env_free.sum()),
                 "pick_configs": len(self.pick_rank), "place_configs": len(self.place_rank),
                 **({"failure": self.failure} if self.failure else {})}
-
-
-def environment_filter(robot: Robot, grasps: GraspList, object_pose: np.ndarray, test: ObstacleTest) -> np.ndarray:
-    """Per grasp: True if the hand at that grasp, the object at `object_pose`, is clear of the environment."""
-    hand = load_hand_model(robot.spec.arm(grasps.hand).hand)
-    return np.array([not test.hits(posed_shapes(hand, grasps.finger_q[r], object_pose @ grasps.hand_pose[r]))
-                     for r in range(len(grasps))], dtype=bool)
 
 
 class ConfigSampler:

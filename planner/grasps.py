@@ -19,12 +19,14 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from .collision import CollisionParams
 from .errors import RegraspError
 from .finger_workspace import FingerWorkspace, WorkspaceParams, hand_workspaces
 from .forked import forked_map
 from .grasp_frames import box_grid, hopf_rotations
 from .grasp_search import OUTCOMES, FrameGrasp, GraspSearch, SearchParams
 from .hand_model import HandModel, load_hand_model
+from .hand_placement import ObstacleTest, environment_filter
 from .object_model import ObjectModel, mesh_bytes, object_model
 from .results import array, load_result, read_only, save_result, writing
 from .robot_spec import HandSpec, RobotSpec
@@ -267,10 +269,6 @@ def session_grasp_seed(session_seed: int) -> int:
 def clear_count(robot, grasps: GraspList, object_pose: np.ndarray, environment) -> int:
     """How many grasps of a list keep the hand clear of the obstacles (by the collision model's padding) with the
     object at a pose: those the grasp configurations step goes on with."""
-    from .collision import CollisionParams
-    from .grasp_configs import environment_filter
-    from .hand_placement import ObstacleTest
-
     obstacles = ObstacleTest.of_environment(environment, CollisionParams().env_padding)
     return int(environment_filter(robot, grasps, object_pose, obstacles).sum())
 

@@ -6,12 +6,18 @@ Shapes come from the standalone hand model (the hand URDF's geometries, meshes a
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import coal
 import numpy as np
 
 from .environment import Environment
 from .geometry import transform3s
-from .hand_model import HandModel
+from .hand_model import HandModel, load_hand_model
+
+if TYPE_CHECKING:
+    from .grasps import GraspList
+    from .robot import Robot
 
 
 def posed_shapes(hand: HandModel, finger_q: np.ndarray, palm: np.ndarray) -> list[tuple[coal.CollisionGeometry, np.ndarray]]:
@@ -99,3 +105,10 @@ def hands_collide(a: list[tuple[coal.CollisionGeometry, np.ndarray]], b: list[tu
         if coal.collide(a[i][0], transform3s(a[i][1]), b[j][0], transform3s(b[j][1]), request, coal.CollisionResult()):
             return True
     return False
+
+
+def environment_filter(robot: Robot, grasps: GraspList, object_pose: np.ndarray, test: ObstacleTest) -> np.ndarray:
+    """Per grasp: True if the hand at that grasp, the object at `object_pose`, is clear of the environment."""
+    hand = load_hand_model(robot.spec.arm(grasps.hand).hand)
+    return np.array([not test.hits(posed_shapes(hand, grasps.finger_q[r], object_pose @ grasps.hand_pose[r]))
+                     for r in range(len(grasps))], dtype=bool)

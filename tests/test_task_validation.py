@@ -347,14 +347,9 @@ def test_reach_is_the_same_in_check_and_the_arms_step(tmp_path, default_scene):
 
 def test_wide_starts_find_place_configurations_the_near_rest_ones_miss(default_scene):
     from planner.config_score import ConfigScorer
-    from planner.grasp_configs import (
-        ConfigSampler,
-        GraspConfigParams,
-        environment_filter,
-        hand_configurations,
-    )
+    from planner.grasp_configs import ConfigSampler, GraspConfigParams, hand_configurations
     from planner.grasps import GraspParams, grasp_list
-    from planner.hand_placement import ObstacleTest
+    from planner.hand_placement import ObstacleTest, environment_filter
     from planner.object_collision import ObjectCollision
 
     robot = default_scene.robot
