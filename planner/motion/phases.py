@@ -106,6 +106,7 @@ class PhasePlanner:
         self.validities: dict[tuple, Validity] = {}
         self.distances: dict[int, Clearances] = {}
         self.checked: dict[tuple[int, bytes], bool] = {}  # see valid
+        self.measured: dict[tuple[int, bytes], dict[str, float]] = {}  # see clearances
         self.finger_names = {arm: self.finger_of_geometry(arm) for arm in robot.spec.arm_names}
 
     # ----- kinematics
@@ -259,10 +260,14 @@ class PhasePlanner:
             ("object", t.object_padding, t.object_clearance))))
 
     def clearances(self, model: CollisionModel, q: np.ndarray) -> dict[str, float]:
-        """A situation's clearances at q over its moving pairs (see validity.Clearances), scratch data kept per model."""
+        """A situation's clearances at q over its moving pairs (see validity.Clearances), scratch data kept per model;
+        measured once per configuration (a transit's ends were measured when they were found ready)."""
         if id(model) not in self.distances:
             self.distances[id(model)] = Clearances(model, "moving", far(self.transit_profile))
-        return self.distances[id(model)](q)
+        key = (id(model), q.tobytes())
+        if key not in self.measured:
+            self.measured[key] = self.distances[id(model)](q)
+        return self.measured[key]
 
     def validity(self, model: CollisionModel, profile: Profile) -> Validity:
         """The validity of a situation's model over its moving pairs (the robot's displacement radii computed once, one
