@@ -392,6 +392,8 @@ class PhasePlanner:
         """The colliding pairs of the fingers' motion from q to `values` all at once; empty when a way is valid (see
         finger_path)."""
         target = self.with_fingers(q, arm, values)
+        if np.allclose(target, q):
+            return []
         validity = self.finger_validity(q, target, situation)
         if self.finger_path(q, arm, values, validity) is not None:
             return []
