@@ -13,7 +13,7 @@ import collections
 import dataclasses
 import os
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import trimesh
@@ -32,6 +32,10 @@ from .results import array, load_result, read_only, save_result, writing
 from .robot_spec import HandSpec, RobotSpec
 from .steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
 from .user_cache import cache_key, cache_path, computing, read_cached
+
+if TYPE_CHECKING:
+    from .environment import Environment
+    from .robot import Robot
 
 CODE_VERSION = "grasps-2"  # 2: no seconds in the list
 CHUNKS_PER_WORKER = 6
@@ -266,7 +270,7 @@ def session_grasp_seed(session_seed: int) -> int:
     return seed_of(np.random.default_rng(step_seed(session_seed, SEED_NAME)))
 
 
-def clear_count(robot, grasps: GraspList, object_pose: np.ndarray, environment) -> int:
+def clear_count(robot: Robot, grasps: GraspList, object_pose: np.ndarray, environment: Environment) -> int:
     """How many grasps of a list keep the hand clear of the obstacles (by the collision model's padding) with the
     object at a pose: those the grasp configurations step goes on with."""
     obstacles = ObstacleTest.of_environment(environment, CollisionParams().env_padding)

@@ -333,8 +333,8 @@ class PhasePlanner:
 
     @staticmethod
     def staged(q: np.ndarray, target: np.ndarray, order: list[np.ndarray]) -> np.ndarray:
-        """The polyline from q moving each stage's joints to the target in turn (stages that move nothing dropped); the
-        stages cover every joint that differs."""
+        """The polyline from q moving each stage's joints to their values in target, stage after stage (stages that move
+        nothing dropped; joints in no stage stay as at q)."""
         path = [q]
         for joints in order:
             step = path[-1].copy()
