@@ -555,24 +555,36 @@ class PhasePlanner:
         opening = [] if np.allclose(q_end, scene.q_final) else [
             self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f, None)]
 
-        # the transits: independent of each other now that every contact motion is made
-        def place() -> list[Piece]:
-            away = self.away(retreat_a[-1].path[-1], a.arm, q_place, held_b)
-            return away + self.reach(2, (away or retreat_a)[-1].path[-1], downs, first_down, held_b)
-
+        # the transits: independent of each other now that every contact motion is made; run longest first (the Place
+        # phase's two, then Carry's, Rest's, Grasp's), so the last to finish is a short one
         to_grasp = (0, lambda: self.reach(0, scene.q_initial, grasps, first_grasp, static_i))
         to_rest = (3, lambda: [self.transit(3, retreat_b[-1].path[-1], q_end, static_f)])
         if direct:  # carried by the one hand from the lift to above the placement
-            to_grasp, carry, rest = self.transits([to_grasp, (1, lambda: self.reach(1, q_lifted, downs, first_down, held_a)), to_rest])
+            carry, rest, to_grasp = self.transits([(1, lambda: self.reach(1, q_lifted, downs, first_down, held_a)), to_rest,
+                                                   to_grasp])
+            raise_first([to_grasp, carry, rest])
             return to_grasp + lifted + carry + let_go_b + retreat_b + rest + opening
-        to_grasp, carry, to_place, rest = self.transits([
-            to_grasp, (1, lambda: self.reach(1, q_lifted, exchanges, first_exchange, held_a)), (2, place), to_rest])
-        return to_grasp + lifted + carry + let_go_a + retreat_a + to_place + let_go_b + retreat_b + rest + opening
+        # the picking arm alone away from the object, then the Place transit from where it went: both at once, the second
+        # assuming the first reaches its first target; when it does not, the other targets are tried after them
+        q_retreat = retreat_a[-1].path[-1]
+        targets = self.away_targets(q_retreat, a.arm, q_place, held_b)
+        start = targets[0] if targets else q_retreat
+        to_place, away, carry, rest, to_grasp = self.transits([
+            (2, lambda: self.reach(2, start, downs, first_down, held_b)),
+            (2, lambda: self.away(q_retreat, a.arm, targets[:1], held_b)),
+            (1, lambda: self.reach(1, q_lifted, exchanges, first_exchange, held_a)),
+            to_rest, to_grasp])
+        raise_first([to_grasp, carry])
+        if targets and not away:
+            away = self.away(q_retreat, a.arm, targets[1:], held_b)
+            to_place = self.reach(2, (away or retreat_a)[-1].path[-1], downs, first_down, held_b)
+        raise_first([to_place, rest])
+        return to_grasp + lifted + carry + let_go_a + retreat_a + away + to_place + let_go_b + retreat_b + rest + opening
 
-    def transits(self, jobs: list[tuple[int, Callable[[], list[Piece]]]]) -> list[list[Piece]]:
-        """The pieces of each (phase, job), run in forked workers (one per core); each job has its own random stream and
-        its own copy of the graph, so the result does not depend on how many run at once. Their figures join their
-        phases'; the first failure, in phase order, is raised."""
+    def transits(self, jobs: list[tuple[int, Callable[[], list[Piece]]]]) -> list[list[Piece] | PieceFailed]:
+        """The pieces of each (phase, job), or how it failed, in the order given; run in that order in forked workers
+        (one per core). Each job has its own random stream and its own copy of the graph, so the result does not depend
+        on how many run at once. Their figures join their phases'."""
         graph, rng, seeds = self.graph, self.rng, self.rng.integers(2**63, size=len(jobs))
 
         def run(i: int) -> tuple[list[Piece] | tuple[int, str, str], TransitStats]:
@@ -590,21 +602,29 @@ class PhasePlanner:
         for (phase, _), (_, stats) in zip(jobs, results):
             for f in dataclasses.fields(stats):
                 setattr(self.stats[phase], f.name, getattr(self.stats[phase], f.name) + getattr(stats, f.name))
-        for value, _ in results:
-            if isinstance(value, tuple):
-                raise PieceFailed(*value)
-        return [value for value, _ in results]
+        return [PieceFailed(*value) if isinstance(value, tuple) else value for value, _ in results]
 
-    def away(self, q: np.ndarray, arm: str, q_place: np.ndarray, situation: Situation) -> list[Piece]:
-        """The picking arm alone from its retreat to where it is at the placement, else to where it is at the end (so
-        the object, held by the other hand, is free of it before the Place transit begins, and that transit starts
-        where the graph is valid); nothing when neither motion is found quickly (the Place transit moves both arms)."""
+    def away_targets(self, q: np.ndarray, arm: str, q_place: np.ndarray, situation: Situation) -> list[np.ndarray]:
+        """Where the picking arm alone may go from its retreat, in order (see away): q with that arm as it is at the
+        placement, else as it is at the end; those a transit can end at."""
         idx = self.robot.arm_idx[arm]
+        out = []
         for there in (q_place, self.scene.q_final):
             target = q.copy()
             target[idx] = there[idx]
             try:
                 self.ready(target, situation, 2, "arm away")
+            except PieceFailed:
+                continue
+            out.append(target)
+        return out
+
+    def away(self, q: np.ndarray, arm: str, targets: list[np.ndarray], situation: Situation) -> list[Piece]:
+        """The picking arm alone from its retreat to the first of `targets` it reaches (so the object, held by the
+        other hand, is free of it before the Place transit begins, and that transit starts where the graph is valid);
+        nothing when no motion is found quickly (the Place transit moves both arms)."""
+        for target in targets:
+            try:
                 return [self.transit(2, q, target, situation, arm)]
             except PieceFailed:
                 continue
@@ -686,6 +706,13 @@ class PhasePlanner:
 
 
 FREE_ENOUGH = 0.75  # an end keeping three quarters of every transit padding is taken without looking further
+
+
+def raise_first(results: list[list[Piece] | PieceFailed]) -> None:
+    """Raise the first failure among the transits' results (given in phase order)."""
+    failed = next((r for r in results if isinstance(r, PieceFailed)), None)
+    if failed is not None:
+        raise failed
 
 
 def freest(options: Iterator[tuple]) -> Iterator[tuple]:

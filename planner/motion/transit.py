@@ -246,8 +246,10 @@ def rrt_transit(space: JointSpace, full: MotionValidity, near: MotionValidity, q
 
 
 def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: np.random.Generator, attempts: int) -> np.ndarray:
-    """Random shortcuts between two points of the polyline (by arc length), kept when the straight motion is valid
-    (checked with `near` when it leaves the first segment or reaches the last: close to the ends)."""
+    """Random shortcuts between two points of the polyline (by arc length), kept when the two points and the straight
+    motion between them are valid (checked with `near` when it leaves the first segment or reaches the last: close to
+    the ends). The points are checked too: one inside a checked segment keeps the clearance, not the padding that a
+    motion check needs at both ends for its guarantee."""
     path = np.array(path, dtype=float)
     for _ in range(attempts):
         if len(path) < 3:
@@ -260,7 +262,7 @@ def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: 
             continue
         a = path[i] + (s1 - cum[i]) / max(seg[i], 1e-12) * (path[i + 1] - path[i])
         b = path[j] + (s2 - cum[j]) / max(seg[j], 1e-12) * (path[j + 1] - path[j])
-        if (near if i == 0 or j == len(seg) - 1 else full).motion_valid(a, b, ends=False):
+        if (near if i == 0 or j == len(seg) - 1 else full).motion_valid(a, b):
             path = np.concatenate([path[: i + 1], [a, b], path[j + 1:]])
     return _drop_duplicates(path)
 
