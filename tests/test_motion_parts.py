@@ -19,7 +19,7 @@ from oracle import Oracle
 from planner.motion.result import MotionParams
 from planner.motion.space import JointSpace
 from planner.motion.timing import sample_polyline, segment_duration
-from planner.motion.transit import TransitParams
+from planner.motion.transit import TransitParams, shortcut
 
 TRANSIT = TransitParams.of(MotionParams())
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
@@ -62,6 +62,33 @@ def test_joint_space_holds_and_reduces():
     assert space.distance(base, q) == pytest.approx(np.hypot(6.0, 5.0))
     with pytest.raises(ValueError):
         space.base[0] = 1.0
+
+
+def test_shortcuts_start_and_end_at_valid_states():
+    """A point inside a checked segment need not be a valid state (between two checks it keeps the clearance, not the
+    padding): a shortcut from it would not keep its guarantee. Here the path crosses a band of such points; no
+    shortcut may start or end in it."""
+    band = (0.3, 0.6)  # x range of states too near something to start a motion from
+    wall = np.array([0.5, 0.9])  # a disc no motion may cross
+
+    class Rule:
+        def state_valid(self, q):
+            return not band[0] < q[0] < band[1]
+
+        def motion_valid(self, qa, qb, ends=True):
+            if ends and not (self.state_valid(qa) and self.state_valid(qb)):
+                return False
+            s = np.clip(np.dot(wall - qa, qb - qa) / max(np.dot(qb - qa, qb - qa), 1e-12), 0.0, 1.0)
+            return bool(np.linalg.norm(qa + s * (qb - qa) - wall) > 0.2)
+
+    path = np.array([[0.0, 0.0], [0.2, 0.1], [0.8, 0.1], [1.0, 0.0], [1.0, 1.0]])
+    rule = Rule()
+    for seed in range(20):
+        out = shortcut(path, rule, rule, np.random.default_rng(seed), 16)
+        assert np.allclose(out[0], path[0]) and np.allclose(out[-1], path[-1])
+        new = [q for q in out if not any(np.allclose(q, p) for p in path)]
+        assert all(rule.state_valid(q) for q in new), f"seed {seed}: a shortcut starts or ends inside the band"
+        assert all(rule.motion_valid(a, b, ends=False) for a, b in zip(out[:-1], out[1:]))
 
 
 @pytest.fixture(scope="module")
