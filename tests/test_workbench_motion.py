@@ -78,6 +78,21 @@ def _middle_held(result: Motion, phase: int) -> int:
     return int(samples[len(samples) // 2])
 
 
+def _apart_held(workbench: Workbench, layer: MotionLayer, phases: tuple[int, int]) -> tuple[int, int]:
+    """A sample of each phase, among the middle half of those where a hand holds the object, the two where the object
+    projects farthest apart (the test needs it to move visibly, whichever path the planner found)."""
+    r = layer.result
+    middles, projected = [], []
+    for phase in phases:
+        samples = np.flatnonzero((r.phase == phase) & (r.holder >= 0))
+        assert len(samples), f"no sample of {PHASES[phase]} has the object held"
+        middles.append(samples[len(samples) // 4: max(3 * len(samples) // 4, len(samples) // 4 + 1)])
+        projected.append(np.array([_project(workbench, _object_centre(layer, int(i))) for i in middles[-1]]))
+    apart = np.linalg.norm(projected[0][:, None] - projected[1][None], axis=2)
+    a, b = np.unravel_index(int(np.argmax(apart)), apart.shape)
+    return int(middles[0][a]), int(middles[1][b])
+
+
 def _object_on_screen(workbench: Workbench, page: Page) -> np.ndarray:
     """The centre (x, y px) of the pixels the workbench's object covers (the motion layer moves it)."""
     rows, cols = np.nonzero(_object_pixels(workbench, page))
@@ -132,10 +147,10 @@ def test_object_moves_with_the_hand(workbench: Workbench, page: Page, layer: Mot
     """At a Carry sample, then a Place sample, the robot is at the sample's configuration and the object's pixels sit where
     the saved object pose projects: they moved on screen with the holding hand."""
     r = layer.result
+    samples = dict(zip((CARRY, PLACE), _apart_held(workbench, layer, (CARRY, PLACE))))
     centres = []
     try:
-        for phase in (CARRY, PLACE):
-            i = _middle_held(r, phase)
+        for phase, i in samples.items():
             layer.timeline.value = i
             assert _wait_for(lambda i=i: np.allclose(workbench.q, r.q[i])), "the timeline did not pose the robot"
             assert PHASES[phase] in layer.now.content
@@ -143,8 +158,8 @@ def test_object_moves_with_the_hand(workbench: Workbench, page: Page, layer: Mot
             assert np.linalg.norm(seen - expected) < NEAR, f"{PHASES[phase]}: object seen at {seen}, its pose projects to {expected}"
             centres.append(seen)
         moved = np.linalg.norm(centres[1] - centres[0])
-        expected = np.linalg.norm(_project(workbench, _object_centre(layer, _middle_held(r, PLACE)))
-                                  - _project(workbench, _object_centre(layer, _middle_held(r, CARRY))))
+        expected = np.linalg.norm(_project(workbench, _object_centre(layer, samples[PLACE]))
+                                  - _project(workbench, _object_centre(layer, samples[CARRY])))
         assert moved > 2 * NEAR and abs(moved - expected) < NEAR, f"the object moved {moved:.0f} px on screen, its poses {expected:.0f} px"
     finally:
         layer.seek(0)
