@@ -358,10 +358,7 @@ class PhasePlanner:
         """A valid motion of the fingers from q to `values`: the first valid of finger_motions, else the fingers one
         after the other, each the first valid of its own ways (the others where they are: a thumb closing all at once
         beside a ring finger hooking its tip first); None when a finger has no valid way."""
-        paths = self.finger_motions(q, arm, values)
-        if not paths:
-            return q[None]
-        for path in paths:
+        for path in self.finger_motions(q, arm, values):
             if self.valid(validity, path):
                 return path
         target = self.with_fingers(q, arm, values)
