@@ -393,9 +393,13 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     hook, whole = robot.finger_idx[arm][names[0]], robot.finger_idx[arm][names[1]]
 
     class Rule:
-        """Valid: `hook` moves one joint at a time, tip before base; `whole` moves all its joints at once."""
+        """Valid: `hook` moves one joint at a time, tip before base; `whole` moves all its joints at once (a path that
+        breaks the rule fails at its first configuration)."""
 
-        def path_valid(self, path):
+        def path_hit(self, path):
+            return None if self.follows(path) else path[0]
+
+        def follows(self, path):
             steps = list(zip(path[:-1], path[1:]))
             if any(np.sum(~np.isclose(a[hook], b[hook])) > 1 for a, b in steps):
                 return False
@@ -406,5 +410,5 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
             return order == sorted(order, reverse=True)
 
     found = planner.finger_path(q, arm, target, Rule())
-    assert found is not None and Rule().path_valid(found), "no valid way found finger by finger"
+    assert found is not None and Rule().follows(found), "no valid way found finger by finger"
     assert np.allclose(found[0], q) and np.allclose(found[-1, hand], target)

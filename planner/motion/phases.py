@@ -105,7 +105,7 @@ class PhasePlanner:
         self.models: dict[tuple, CollisionModel] = {}
         self.validities: dict[tuple, Validity] = {}
         self.distances: dict[int, Clearances] = {}
-        self.checked: dict[tuple[int, bytes], bool] = {}  # see valid
+        self.checked: dict[tuple[int, bytes], np.ndarray | None] = {}  # see valid
         self.measured: dict[tuple[int, bytes], dict[str, float]] = {}  # see clearances
         self.finger_names = {arm: self.finger_of_geometry(arm) for arm in robot.spec.arm_names}
 
@@ -148,15 +148,19 @@ class PhasePlanner:
         self.stats[phase].seconds_contact += time.perf_counter() - t
         return np.array(out)
 
-    def retreats(self, q: np.ndarray, arm: str, keep: str | None, hover: bool, phase: int, part: str) -> list[Iterator[np.ndarray]]:
+    def retreats(self, q: np.ndarray, arm: str, keep: str | None, hover: bool, phase: int, part: str,
+                 leaving: bool = False) -> list[Iterator[np.ndarray]]:
         """Two groups of candidate IK polylines from q (the palm at a grasp) backing off by the pre-grasp distance: along
         the approach direction (that distance, farther, nearer), then rising by the lift height when `hover` (the object
         rests on a support there; elsewhere rising is the last resort); then tilted 30° and 55° from the approach
         direction in six directions each (where fingers moving along it would sweep the object or a support), rising
-        likewise. Each group is computed only when it is reached; candidates the arm cannot follow are skipped."""
+        likewise. Each group is computed only when it is reached; candidates the arm cannot follow are skipped.
+        `leaving` (a hand letting go in the air): farther first. Its fingers, opened part way, can still be a millimetre
+        from the object after the pre-grasp distance, and the transit that follows checks as densely as its ends need."""
         back = self.backoff(q, arm)
         rises = (1.0, 1.0, 2.0, 1.0) if hover else (0.0, 0.0, 0.0, 1.0)
-        along = [(scale * back, rise) for scale, rise in zip((1.0, 1.7, 1.0, 0.5) if hover else (1.0, 1.7, 0.5, 1.0), rises)]
+        scales = (1.0, 1.7, 1.0, 0.5) if hover else (1.7, 1.0, 0.5, 1.0) if leaving else (1.0, 1.7, 0.5, 1.0)
+        along = [(scale * back, rise) for scale, rise in zip(scales, rises)]
         axis = back / np.linalg.norm(back)
         u = np.cross(axis, [0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0])
         u /= np.linalg.norm(u)
@@ -202,7 +206,7 @@ class PhasePlanner:
             validity = self.validity(self.model(situation, approach[0], np.flatnonzero(np.ptp(approach, axis=0) > 0)),
                                      self.contact_profile)
             if not self.valid(validity, approach):
-                return validity.first_collision(approach)
+                return self.collisions(validity, approach)
             shaping = self.finger_collisions(self.with_fingers(approach[0], grasp.arm, open_hand), grasp.arm, pre, situation)
             return shaping or self.finger_collisions(approach[-1], grasp.arm, grasp.fingers, closing)
 
@@ -317,7 +321,7 @@ class PhasePlanner:
         ok = self.valid(validity, path)
         self.stats[phase].seconds_contact += time.perf_counter() - t
         if not ok:
-            raise PieceFailed(phase, part, lambda: f"collides ({_pairs(validity.first_collision(path))})")
+            raise PieceFailed(phase, part, lambda: f"collides ({_pairs(self.collisions(validity, path))})")
         return Piece(phase, part, np.asarray(path), situation, hand)
 
     def finger_orders(self, fingers: list[np.ndarray]) -> list[list[np.ndarray]]:
@@ -382,7 +386,7 @@ class PhasePlanner:
         path = self.finger_path(q, arm, values, validity)
         self.stats[phase].seconds_contact += time.perf_counter() - t
         if path is None:
-            raise PieceFailed(phase, part, lambda: f"collides ({_pairs(validity.first_collision(np.stack([q, target])))})")
+            raise PieceFailed(phase, part, lambda: f"collides ({_pairs(self.collisions(validity, np.stack([q, target])))})")
         return [Piece(phase, part, path, situation, arm)]
 
     def finger_collisions(self, q: np.ndarray, arm: str, values: np.ndarray, situation: Situation) -> list[tuple[str, str]]:
@@ -394,7 +398,7 @@ class PhasePlanner:
         validity = self.finger_validity(q, target, situation)
         if self.finger_path(q, arm, values, validity) is not None:
             return []
-        return validity.first_collision(np.stack([q, target]))
+        return self.collisions(validity, np.stack([q, target]))
 
     def finger_validity(self, q: np.ndarray, target: np.ndarray, situation: Situation) -> Validity:
         """The contact validity of finger motions from q to target: over the pairs the joints that differ change."""
@@ -403,9 +407,18 @@ class PhasePlanner:
     def valid(self, validity: Validity, path: np.ndarray) -> bool:
         """validity.path_valid(path), checked once per plan: the pre-shape search checks the approach, shaping and
         closing of each candidate, and the pieces built from the one it keeps are the same motions."""
+        return self._hit(validity, path) is None
+
+    def collisions(self, validity: Validity, path: np.ndarray) -> list[tuple[str, str]]:
+        """The colliding pairs where the path's check failed (none when valid): the pre-shape search opens the fingers
+        they name."""
+        return validity.colliding_pairs(self._hit(validity, path))
+
+    def _hit(self, validity: Validity, path: np.ndarray) -> np.ndarray | None:
+        """validity.path_hit(path), once per plan (see valid)."""
         key = (id(validity), path.tobytes())
         if key not in self.checked:
-            self.checked[key] = validity.path_valid(path)
+            self.checked[key] = validity.path_hit(path)
         return self.checked[key]
 
     def transit(self, phase: int, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, arm: str | None = None) -> Piece:
@@ -525,8 +538,8 @@ class PhasePlanner:
             let_go_a = self.fingers(1, "opening", q_both, a.arm, let_a, released)
 
             q_let = self.with_fingers(q_both, a.arm, let_a)
-            retreat_a = next(self.options(1, "retreat", itertools.chain(*self.retreats(q_let, a.arm, b.arm, False, 1, "retreat")),
-                                          leave(released, held_b, 1, a.arm)))
+            backing = itertools.chain(*self.retreats(q_let, a.arm, b.arm, False, 1, "retreat", leaving=True))
+            retreat_a = next(self.options(1, "retreat", backing, leave(released, held_b, 1, a.arm)))
 
         # Place: (above the placement, set-down) candidates; the picking hand keeps its fingers as they let go until the
         # end (opened near the object, they hit it); in a direct transfer it is the hand that holds the object

@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import CollisionModel, geometry_data
-from ..roadmap.local_planner import SegmentChecker, geometry_radii, van_der_corput
+from ..roadmap.local_planner import SegmentChecker, geometry_radii
 
 
 class StateValidity(Protocol):
@@ -98,18 +98,27 @@ class Validity:
         """How many evenly spaced configurations a segment is checked at (its resolution), for this or another subset."""
         return int(self.seg.steps(qa, qb, subset or self.subset)[0])
 
+    def colliding_pairs(self, q: np.ndarray | None) -> list[tuple[str, str]]:
+        """The pairs of the subset colliding at q, by geometry name (none for None: for messages and pre-shape choices)."""
+        return [] if q is None else self.seg.checker.colliding_pairs(q, self.subset)
+
     def first_collision(self, path: np.ndarray) -> list[tuple[str, str]]:
-        """The colliding pairs at the first configuration of a polyline that fails its checks (for messages)."""
-        checker = self.seg.checker
+        """The colliding pairs where a polyline first fails its checks (see path_hit)."""
+        return self.colliding_pairs(self.path_hit(path))
+
+    def path_hit(self, path: np.ndarray) -> np.ndarray | None:
+        """The first configuration whose check fails, its states checked first, then its segments in order; None when
+        the polyline is valid (every state and every segment)."""
+        hit = next((q for q in path if not self.state_valid(q)), None)
         for a, b in zip(path[:-1], path[1:]):
-            for s in van_der_corput(self.samples(a, b)):
-                if checker.in_collision(a + s * (b - a), self.subset):
-                    return checker.colliding_pairs(a + s * (b - a), self.subset)
-        return checker.colliding_pairs(path[-1], self.subset)
+            if hit is not None:
+                break
+            hit = self.seg.first_hit(a, b, self.subset, ends=False)
+        return hit
 
     def path_valid(self, path: np.ndarray) -> bool:
         """Every state and every segment of a polyline."""
-        return all(self.state_valid(q) for q in path) and all(self.motion_valid(a, b, ends=False) for a, b in zip(path[:-1], path[1:]))
+        return self.path_hit(path) is None
 
 
 KINDS = ("env", "self", "object")

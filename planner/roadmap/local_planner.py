@@ -115,6 +115,14 @@ class SegmentChecker:
 
     def segment_free(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> bool:
         """True if every check of the segment passes (`ends=False`: the two ends are known free)."""
+        return self.first_hit(qa, qb, subset, ends) is None
+
+    def first_hit(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> np.ndarray | None:
+        """The first configuration of the segment, in checking order, whose check fails; None when all pass."""
         s = van_der_corput(int(self.steps(qa, qb, subset)[0]))
         dq = qb - qa
-        return not any(self.checker.in_collision(qa + t * dq, subset) for t in (s if ends else s[2:]))
+        for t in s if ends else s[2:]:
+            q = qa + t * dq
+            if self.checker.in_collision(q, subset):
+                return q
+        return None
