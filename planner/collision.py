@@ -199,9 +199,19 @@ class CollisionModel:
     subsets: dict[str, np.ndarray]
     ends: np.ndarray  # (n_pairs, 2) the geometry indices of each collision pair (read once: the pair list is slow to walk)
     support: np.ndarray  # (n_geometries, nq) bool: the joints that move each geometry
+    pair_padding: tuple[tuple[int, float], ...] = ()  # (pair, padding): pairs padded otherwise than their kind
 
     def checker(self) -> "CollisionChecker":
         return CollisionChecker(self)
+
+    def paddings(self) -> np.ndarray:
+        """(n_pairs,) each pair's padding: its kind's ('env', 'object', else 'self') unless `pair_padding` names it."""
+        out = np.full(len(self.ends), self.params.self_padding)
+        out[self.subsets["env"]] = self.params.env_padding
+        out[self.subsets.get("object", [])] = self.params.object_padding
+        for pair, padding in self.pair_padding:
+            out[pair] = padding
+        return out
 
     def relative_joints(self) -> np.ndarray:
         """(n_pairs, nq) bool: the joints whose motion changes each pair's relative pose (a joint above both geometries
@@ -266,7 +276,7 @@ def joint_support(model: pin.Model, parents: list[int]) -> np.ndarray:
 
 
 def geometry_data(cm: CollisionModel, subset: str) -> pin.GeometryData:
-    """Fresh collision data of `cm` with only the subset's pairs active, each padded as the model's parameters say
+    """Fresh collision data of `cm` with only the subset's pairs active, each padded as the model says (see paddings)
     (set with one call each: a Python loop over thousands of pairs cost more than checking a short motion)."""
     gm, ends = cm.geometry, cm.ends
     n = len(gm.geometryObjects)
@@ -279,13 +289,9 @@ def geometry_data(cm: CollisionModel, subset: str) -> pin.GeometryData:
 
     active = np.zeros(len(ends), dtype=bool)
     active[cm.subsets[subset]] = True
-    margin = np.zeros(len(ends))
-    margin[cm.subsets["env"]] = cm.params.env_padding
-    margin[cm.subsets["self"]] = cm.params.self_padding
-    margin[cm.subsets.get("object", [])] = cm.params.object_padding
     gd = pin.GeometryData(gm)
     gd.setActiveCollisionPairs(gm, table(active), True)
-    gd.setSecurityMargins(gm, table(margin), True, False)
+    gd.setSecurityMargins(gm, table(cm.paddings()), True, False)
     return gd
 
 

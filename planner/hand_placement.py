@@ -42,7 +42,7 @@ class ObstacleTest:
 
     def __init__(self, obstacles: list[tuple[coal.CollisionGeometry, np.ndarray]], margin: float):
         self.obstacles = [(g, transform3s(T), *_bounding_sphere(g, T)) for g, T in obstacles]
-        self.boxes = np.array([_world_aabb(g, T) for g, T in obstacles]).reshape(-1, 2, 3)
+        self.boxes = np.array([world_aabb(g, T) for g, T in obstacles]).reshape(-1, 2, 3)
         self.request = coal.CollisionRequest()
         self.request.security_margin = margin
         self.margin = margin
@@ -80,7 +80,7 @@ class ObstacleTest:
         return hit
 
 
-def _world_aabb(geometry: coal.CollisionGeometry, pose: np.ndarray) -> np.ndarray:
+def world_aabb(geometry: coal.CollisionGeometry, pose: np.ndarray) -> np.ndarray:
     """(2, 3): the world box around a posed shape (its local box's corners transformed)."""
     _ensure_aabb(geometry)
     lo, hi = np.asarray(geometry.aabb_local.min_), np.asarray(geometry.aabb_local.max_)

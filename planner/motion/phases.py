@@ -36,6 +36,7 @@ from ..arm_ik import ArmIK
 from ..collision import CollisionModel
 from ..forked import forked_map
 from ..geometry import coal_mesh, transform3s
+from ..hand_placement import world_aabb
 from ..reach import approach_direction
 from ..roadmap.local_planner import geometry_radii
 from ..task import Scene
@@ -44,7 +45,7 @@ from .result import PHASES
 from .situation import Situation, finger_geometries, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
-from .validity import Clearances, Profile, Validity, far, fits, fitted, make_validity
+from .validity import Clearances, Profile, Validity, far, fits, make_validity
 
 
 @dataclass(frozen=True)
@@ -106,7 +107,7 @@ class PhasePlanner:
         self.validities: dict[tuple, Validity] = {}
         self.distances: dict[int, Clearances] = {}
         self.checked: dict[tuple[int, bytes], np.ndarray | None] = {}  # see valid
-        self.measured: dict[tuple[int, bytes], dict[str, float]] = {}  # see clearances
+        self.measured: dict[tuple[int, bytes], dict[int, float]] = {}  # see clearances
         self.finger_names = {arm: self.finger_of_geometry(arm) for arm in robot.spec.arm_names}
 
     # ----- kinematics
@@ -253,32 +254,37 @@ class PhasePlanner:
         the transit's checks are as sparse as the roadmap's)."""
         t0 = time.perf_counter()
         model = self.model(situation, q, self.transit_idx)
-        have = self.clearances(model, q)
+        near, meter = self.clearances(model, q), self.meter(model)
+        have = meter.by_kind(near)
         self.stats[phase].seconds_contact += time.perf_counter() - t0
         if not fits(self.transit_profile, have):
-            end = lambda: self.validity(model, fitted(self.transit_profile, have))  # noqa: E731
+            end = lambda: self.validity(model, self.transit_profile, meter.fitted_pairs(self.transit_profile, near))  # noqa: E731
             raise PieceFailed(phase, part, lambda: f"ends too near something to start a transit ({_pairs(end().first_collision(q[None]))})")
         t = self.transit_profile
         return min(1.0, *((have[k] - keep) / (pad - keep) for k, pad, keep in (
             ("env", t.env_padding, t.env_clearance), ("self", t.self_padding, t.self_clearance),
             ("object", t.object_padding, t.object_clearance))))
 
-    def clearances(self, model: CollisionModel, q: np.ndarray) -> dict[str, float]:
-        """A situation's clearances at q over its moving pairs (see validity.Clearances), scratch data kept per model;
-        measured once per configuration (a transit's ends were measured when they were found ready)."""
+    def meter(self, model: CollisionModel) -> Clearances:
+        """The clearance measure of a situation's model over its moving pairs (scratch data built once per model)."""
         if id(model) not in self.distances:
             self.distances[id(model)] = Clearances(model, "moving", far(self.transit_profile))
+        return self.distances[id(model)]
+
+    def clearances(self, model: CollisionModel, q: np.ndarray) -> dict[int, float]:
+        """A situation's near pairs at q and their distances (see validity.Clearances), measured once per configuration
+        (a transit's ends were measured when they were found ready)."""
         key = (id(model), q.tobytes())
         if key not in self.measured:
-            self.measured[key] = self.distances[id(model)](q)
+            self.measured[key] = self.meter(model)(q)
         return self.measured[key]
 
-    def validity(self, model: CollisionModel, profile: Profile) -> Validity:
-        """The validity of a situation's model over its moving pairs (the robot's displacement radii computed once, one
-        validity per model and profile)."""
-        key = (id(model), profile)
+    def validity(self, model: CollisionModel, profile: Profile, pair_padding: tuple[tuple[int, float], ...] = ()) -> Validity:
+        """The validity of a situation's model over its moving pairs, some pairs padded otherwise (see
+        Clearances.fitted_pairs); the robot's displacement radii computed once, one validity per model and paddings."""
+        key = (id(model), profile, pair_padding)
         if key not in self.validities:
-            self.validities[key] = make_validity(model, profile, "moving", self.radii)
+            self.validities[key] = make_validity(model, profile, "moving", self.radii, pair_padding)
         return self.validities[key]
 
     def backoff(self, q: np.ndarray, arm: str) -> np.ndarray:
@@ -431,10 +437,11 @@ class PhasePlanner:
             raise ValueError("transit ends must agree on every joint outside the ones it moves")
         part = "transit" if arm is None else "arm away"
         model = self.model(situation, q_start, idx)
-        ends = [self.clearances(model, q) for q in (q_start, q_goal)]
-        profile = fitted(self.transit_profile, {k: min(e[k] for e in ends) for k in ends[0]})
-        near = self.validity(model, profile)  # what touches the ends: as dense as they need
-        full = near if profile == self.transit_profile else self.validity(model, self.transit_profile)
+        start, goal = (self.clearances(model, q) for q in (q_start, q_goal))
+        closest = {pair: min(start.get(pair, np.inf), goal.get(pair, np.inf)) for pair in start.keys() | goal.keys()}
+        full = self.validity(model, self.transit_profile)
+        near = self.validity(model, self.transit_profile, self.meter(model).fitted_pairs(self.transit_profile, closest))
+        # near: what touches the ends, the pairs they hold close checked as densely as those need
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not near.state_valid(q):
                 raise PieceFailed(phase, part, f"its {name} configuration collides ({_pairs(near.first_collision(q[None]))})")
@@ -659,24 +666,34 @@ class PhasePlanner:
         # obstacles whose bounding sphere stays farther than the padding from the bodies' at every offset cannot count
         centre, reach = _bounding_sphere(bodies)
         reach += 2.0 * self.p.lift + self.transit_profile.env_padding
-        obstacles = [(shape, transform3s(ob.pose)) for ob in self.scene.environment
+        obstacles = [(shape, transform3s(ob.pose), world_aabb(shape, ob.pose)) for ob in self.scene.environment
                      for shape in [ob.coal_shape()] for c, r in [_bounding_sphere([(shape, ob.pose)])]
                      if np.linalg.norm(c - centre) < r + reach]
+        spheres = [_bounding_sphere([body]) for body in bodies]
         req, res = coal.DistanceRequest(), coal.DistanceResult()
 
-        def clearance(offset: np.ndarray) -> float:
+        def clearance(offset: np.ndarray, bound: np.ndarray) -> float:
+            """The smallest distance, up to the padding, of a body from an obstacle at the offset: nearest first by
+            `bound` (body, obstacle) a lower bound, skipping those whose bound is no nearer than the smallest so far."""
             out = self.transit_profile.env_padding
-            for shape, placed in bodies:
+            for k in np.argsort(bound, axis=None, kind="stable"):
+                b, o = np.unravel_index(k, bound.shape)
+                if bound[b, o] >= out:
+                    break
+                shape, placed = bodies[b]
                 moved = placed.copy()
                 moved[:3, 3] += offset
-                where = transform3s(moved)
-                for obstacle, at in obstacles:
-                    res.clear()
-                    out = min(out, coal.distance(shape, where, obstacle, at, req, res))
+                res.clear()
+                out = min(out, coal.distance(shape, transform3s(moved), obstacles[o][0], obstacles[o][1], req, res))
             return out
 
         t0 = time.perf_counter()
-        free = [clearance(o) for o in offsets]
+        # per offset, body and obstacle: the distance from the body's bounding sphere to the obstacle's box
+        centres = np.array([c for c, _ in spheres])[None, :, None] + np.array(offsets)[:, None, None]
+        boxes = np.array([box for _, _, box in obstacles]).reshape(1, 1, -1, 2, 3)
+        gap = np.maximum(np.maximum(boxes[..., 0, :] - centres, centres - boxes[..., 1, :]), 0.0)
+        bounds = np.linalg.norm(gap, axis=-1) - np.array([r for _, r in spheres])[None, :, None]
+        free = [clearance(o, bound) for o, bound in zip(offsets, bounds)]
         self.stats[phase].seconds_contact += time.perf_counter() - t0
         return [offsets[i] for i in sorted(range(len(offsets)), key=lambda i: -free[i])][: self.p.lift_candidates]
 

@@ -5,8 +5,8 @@ named pair subset of a situation's collision model (see situation.py) with the l
 displacement bound (roadmap/local_planner.py), so a valid motion keeps every checked pair at least
 its clearance apart along the whole continuous segment. Two profiles state the paddings:
 `transit` keeps the offline roadmap's clearances (so roadmap edges and new edges guarantee the same),
-its paddings lowered per motion to what the motion's ends allow (`fitted`); `contact` is tighter, for
-the short motions that end touching the object (approach, closing, opening, retreat, lift, set-down).
+its paddings lowered per motion, pair by pair, to what the motion's ends allow (`Clearances.fitted_pairs`);
+`contact` is tighter, for the short motions that end touching the object (approach, closing, opening, retreat, lift, set-down).
 """
 from __future__ import annotations
 
@@ -125,9 +125,9 @@ KINDS = ("env", "self", "object")
 
 
 class Clearances:
-    """The smallest distance at a configuration of a subset's pairs with an obstacle ('env'), robot–object pairs
-    ('object') and robot–robot pairs ('self'); inf for a kind the subset lacks or whose pairs are all at least `far[kind]`
-    apart (what a profile cannot use: see `far`). Scratch data built once per model.
+    """The distances at a configuration of a subset's pairs nearer than `far[kind]` (what a profile cannot use beyond:
+    see `far`), by pair, and the smallest per kind: with an obstacle ('env'), robot–object pairs ('object') and
+    robot–robot pairs ('self'). Scratch data built once per model.
 
     Only pairs nearer than `far` are measured: a collision check with `far` as the security margin finds them (GJK stops
     early on pairs far apart), then their exact distances are computed; measuring every pair cost ten times more."""
@@ -139,52 +139,65 @@ class Clearances:
         kind = np.full(len(cm.geometry.collisionPairs), "self", dtype=object)
         kind[cm.subsets["env"]] = "env"
         kind[cm.subsets.get("object", [])] = "object"
-        self.kind = kind[self.pairs]
+        self.kind = kind  # of every pair of the model
         margins = dataclasses.replace(cm.params, **{f"{k}_padding": far[k] for k in KINDS})
         self.gd = geometry_data(dataclasses.replace(cm, params=margins), subset)
 
-    def __call__(self, q: np.ndarray) -> dict[str, float]:
+    def __call__(self, q: np.ndarray) -> dict[int, float]:
+        """pair -> distance, for the subset's pairs nearer than `far` of their kind at q."""
         model, gm, gd = self.cm.robot.model, self.cm.geometry, self.gd
         pin.computeCollisions(model, self.data, gm, gd, q, False)
         results = gd.collisionResults
-        near = [i for i, k in enumerate(self.pairs) if results[int(k)].isCollision()]
+        return {int(k): float(pin.computeDistance(gm, gd, int(k)).min_distance)
+                for k in self.pairs if results[int(k)].isCollision()}
+
+    def by_kind(self, near: dict[int, float]) -> dict[str, float]:
+        """The smallest distance of each kind among measured pairs (inf for a kind none of them is)."""
         out = dict.fromkeys(KINDS, np.inf)
-        for i in near:
-            distance = pin.computeDistance(gm, gd, int(self.pairs[i])).min_distance
-            out[self.kind[i]] = min(out[self.kind[i]], float(distance))
+        for pair, distance in near.items():
+            out[self.kind[pair]] = min(out[self.kind[pair]], distance)
         return out
+
+    def fitted_pairs(self, profile: Profile, near: dict[int, float]) -> tuple[tuple[int, float], ...]:
+        """(pair, padding) for every measured pair whose padding `fitted` would lower, lowered for that pair alone: a motion
+        from an end near one thing checks densely only where that pair's two geometries move relative to each other
+        (a closed thumb near its own wrist moves only with the wrist's last joint)."""
+        out = []
+        for pair, distance in sorted(near.items()):
+            kind = self.kind[pair]
+            padding, keep = getattr(profile, f"{kind}_padding"), getattr(profile, f"{kind}_clearance")
+            if _fit(padding, keep, distance) != padding:
+                out.append((pair, _fit(padding, keep, distance)))
+        return tuple(out)
 
 
 def far(profile: Profile) -> dict[str, float]:
-    """Per kind of pair, a distance beyond which a clearance changes nothing for the profile (neither `fits` nor `fitted`
-    nor how free a transit end is): a little past padding / 0.9."""
+    """Per kind of pair, a distance beyond which a clearance changes nothing for the profile (neither `fits` nor a
+    fitted padding nor how free a transit end is): a little past padding / 0.9."""
     return {k: 1.01 * getattr(profile, f"{k}_padding") / 0.9 for k in KINDS}
 
 
 def fits(profile: Profile, clearance: dict[str, float]) -> bool:
-    """Whether a configuration with these clearances is valid under the profile fitted to them (see `fitted`): each
+    """Whether a configuration with these clearances is valid with paddings fitted to them (see `_fit`): each
     clearance at least its padding, or able to lower it while the clearance guaranteed stays below."""
     return all(clearance[k] > pad or 0.9 * clearance[k] > keep for k, pad, keep in (
         ("env", profile.env_padding, profile.env_clearance), ("self", profile.self_padding, profile.self_clearance),
         ("object", profile.object_padding, profile.object_clearance)))
 
 
-def fitted(profile: Profile, clearance: dict[str, float]) -> Profile:
-    """The profile with each padding lowered, when the given clearances are smaller, to 90 % of them (never to or
-    below the clearance it guarantees): checks stay as sparse as the motion's ends allow, the guarantee unchanged."""
-    def fit(padding: float, keep: float, have: float) -> float:
-        return padding if 0.9 * have >= padding or 0.9 * have <= keep else 0.9 * have
-
-    return dataclasses.replace(profile,
-                               env_padding=fit(profile.env_padding, profile.env_clearance, clearance["env"]),
-                               self_padding=fit(profile.self_padding, profile.self_clearance, clearance["self"]),
-                               object_padding=fit(profile.object_padding, profile.object_clearance, clearance["object"]))
+def _fit(padding: float, keep: float, have: float) -> float:
+    """A padding lowered, when the clearance `have` is smaller, to 90 % of it (never to or below the clearance `keep`
+    it guarantees): checks stay as sparse as a motion's ends allow, the guarantee unchanged."""
+    return padding if 0.9 * have >= padding or 0.9 * have <= keep else 0.9 * have
 
 
-def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all", known_radii: np.ndarray | None = None) -> Validity:
-    """A validity of `cm` with the profile's paddings (the model's own are replaced); `known_radii`: the displacement
-    radii of cm's first geometries (geometry_radii of the model a situation extends), so only the object's are computed."""
+def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all", known_radii: np.ndarray | None = None,
+                  pair_padding: tuple[tuple[int, float], ...] = ()) -> Validity:
+    """A validity of `cm` with the profile's paddings (the model's own are replaced), `pair_padding` ((pair, padding))
+    overriding some pairs' (see Clearances.fitted_pairs); `known_radii`: the displacement radii of cm's first geometries
+    (geometry_radii of the model a situation extends), so only the object's are computed."""
     cm = dataclasses.replace(cm, params=dataclasses.replace(cm.params, env_padding=profile.env_padding,
-                                                            self_padding=profile.self_padding, object_padding=profile.object_padding))
+                                                            self_padding=profile.self_padding, object_padding=profile.object_padding),
+                             pair_padding=pair_padding)
     return Validity(SegmentChecker(cm, profile.env_clearance, profile.self_clearance, profile.object_clearance,
                                    geometry_radii(cm, known_radii)), profile, subset)

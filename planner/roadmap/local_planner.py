@@ -72,9 +72,10 @@ def van_der_corput(n: int) -> np.ndarray:
 
 def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, object_clearance: float = 0.0) -> np.ndarray:
     """(n_pairs,) p - c per pair: how much closer than its padding a pair may come between checks."""
-    out = np.full(len(cm.geometry.collisionPairs), cm.params.self_padding - self_clearance)
-    out[cm.subsets["env"]] = cm.params.env_padding - env_clearance
-    out[cm.subsets.get("object", [])] = cm.params.object_padding - object_clearance
+    keep = np.full(len(cm.ends), self_clearance)
+    keep[cm.subsets["env"]] = env_clearance
+    keep[cm.subsets.get("object", [])] = object_clearance
+    out = cm.paddings() - keep
     if np.any(out <= 0):
         raise ValueError("each padding must exceed the clearance it guarantees")
     return out
