@@ -38,8 +38,8 @@ class MotionParams:
     goal_nodes: int = 16  # transit: an end the graph cannot reach is reconnected to this many of its nearest valid nodes
     max_double_grasps: int = 20  # double grasps tried, best first
     transit_env_padding: float = 0.03  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's),
-    transit_self_padding: float = 0.015  # m: robot-robot and robot-object pairs likewise (both lowered per transit
-    # to what its two ends allow)
+    transit_self_padding: float = 0.015  # m: robot-robot and robot-object pairs likewise (both lowered per transit,
+    # pair by pair, to what its two ends allow)
     contact_env_padding: float = 0.008  # m: contact motions (approach, closing, lift ...) keep obstacles this far at checks
     contact_env_clearance: float = 0.004  # m: ... and this far between checks
     contact_penetration: float = 0.001  # m: hand-object pairs touch at most (0 at checks, this deep between checks)
