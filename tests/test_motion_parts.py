@@ -412,3 +412,53 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     found = planner.finger_path(q, arm, target, Rule())
     assert found is not None and Rule().follows(found), "no valid way found finger by finger"
     assert np.allclose(found[0], q) and np.allclose(found[-1, hand], target)
+
+
+def test_paddings_fitted_pair_by_pair():
+    """A transit end near something lowers the padding of the pairs it holds close only: those found are exactly the
+    pairs an exhaustive distance query puts nearer than padding / 0.9; a pair padded otherwise changes the spacing only
+    of the segments that move it relative to its partner."""
+    import pinocchio as pin
+
+    from planner.collision import build_collision_model
+    from planner.motion.validity import Clearances, far, make_validity, transit_profile
+    from planner.task import find_task, load_task
+
+    scene = load_task(find_task("default"))
+    robot = scene.robot
+    cm = build_collision_model(robot, scene.environment)
+    profile = transit_profile({"env_clearance_m": 0.01, "self_clearance_m": 0.0}, 0.03, 0.015)
+    q = scene.q_initial
+    meter = Clearances(cm, "all", far(profile))
+    near = meter(q)
+    lowered = dict(meter.fitted_pairs(profile, near))
+
+    # the oracle: every pair's distance from a fresh geometry data, no security margin, no broad phase
+    gm, data = cm.geometry, robot.model.createData()
+    gd = pin.GeometryData(gm)
+    pin.updateGeometryPlacements(robot.model, data, gm, gd, q)
+    env = set(cm.subsets["env"].tolist())
+    expected = {}
+    for k in range(len(gm.collisionPairs)):
+        d = pin.computeDistance(gm, gd, k).min_distance
+        padding, keep = (profile.env_padding, profile.env_clearance) if k in env else (profile.self_padding, profile.self_clearance)
+        if keep < 0.9 * d < padding:
+            expected[k] = 0.9 * d
+    assert expected, "the test needs a pair near enough at q_initial to be fitted"
+    assert set(lowered) == set(expected)
+    assert all(abs(lowered[k] - expected[k]) < 1e-6 for k in expected)
+
+    # one of them padded a tenth of a millimetre above its clearance: only the segments that move it get denser
+    k = next(iter(lowered))
+    keep = profile.env_clearance if k in env else profile.self_clearance
+    plain = make_validity(cm, profile, "all")
+    tight = make_validity(cm, profile, "all", pair_padding=((k, keep + 1e-4),))
+    moves = cm.relative_joints()[k]
+    for j in range(robot.nq):
+        qb = q.copy()
+        qb[j] = q[j] + (0.3 if q[j] + 0.3 <= robot.upper[j] else -0.3)
+        if moves[j]:
+            assert tight.samples(q, qb) > plain.samples(q, qb), f"joint {j} moves the tight pair: denser"
+        else:
+            assert tight.samples(q, qb) == plain.samples(q, qb), f"joint {j} does not move it: as sparse as the plain profile"
+    assert moves.any() and not moves.all(), "the segments must include both cases"
