@@ -159,15 +159,16 @@ class Clearances:
         return out
 
     def fitted_pairs(self, profile: Profile, near: dict[int, float]) -> tuple[tuple[int, float], ...]:
-        """(pair, padding) for every measured pair whose padding `fitted` would lower, lowered for that pair alone: a motion
-        from an end near one thing checks densely only where that pair's two geometries move relative to each other
-        (a closed thumb near its own wrist moves only with the wrist's last joint)."""
+        """(pair, padding) for every measured pair whose padding `_fit` lowers, lowered for that pair alone: a motion from
+        an end near one thing checks densely only where that pair's two geometries move relative to each other (a
+        closed thumb near its own wrist moves only with the wrist's last joint)."""
         out = []
         for pair, distance in sorted(near.items()):
             kind = self.kind[pair]
-            padding, keep = getattr(profile, f"{kind}_padding"), getattr(profile, f"{kind}_clearance")
-            if _fit(padding, keep, distance) != padding:
-                out.append((pair, _fit(padding, keep, distance)))
+            padding = getattr(profile, f"{kind}_padding")
+            lowered = _fit(padding, getattr(profile, f"{kind}_clearance"), distance)
+            if lowered != padding:
+                out.append((pair, lowered))
         return tuple(out)
 
 
