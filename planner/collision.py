@@ -19,6 +19,7 @@ import hashlib
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
 import coal
 import numpy as np
@@ -173,12 +174,25 @@ def robot_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParams,
     """The pair set, from the user cache when the spec, URDFs and parameters are unchanged."""
     path = cache_path("collision_pairs", f"{_pair_cache_key(robot, params)}.json")
     if use_cache:
-        cached = read_cached([path], lambda: PairSet.from_json(path.read_text()), "self-collision pair set")
+        cached = read_cached([path], lambda: _read_pair_set(path, _file_version(path)), "self-collision pair set")
         if cached is not None:
             return cached
     pairs = compute_pair_set(robot, gm, params)
     atomic_write_text(path, pairs.to_json())
     return pairs
+
+
+@functools.lru_cache(maxsize=8)
+def _read_pair_set(path: Path, version: tuple[int, int, int]) -> PairSet:
+    """A cached pair set file parsed once per process while it is unchanged (a model is built for every plan; the file is
+    large)."""
+    return PairSet.from_json(path.read_text())
+
+
+def _file_version(path: Path) -> tuple[int, int, int]:
+    """(inode, size, mtime): a cache entry rewritten (atomically: a new inode) or edited in place reads as another version."""
+    st = path.stat()
+    return st.st_ino, st.st_size, st.st_mtime_ns
 
 
 @dataclass(frozen=True, eq=False)

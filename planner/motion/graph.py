@@ -30,7 +30,7 @@ class MotionGraph:
         self.edges = np.array(roadmap.edges, dtype=np.int64)[keep].reshape(-1, 2)
         self.offline = np.ones(len(self.edges), dtype=bool)
         self.n_roadmap = len(self.q)
-        self.index = {_key(u, v): k for k, (u, v) in enumerate(self.edges)}
+        self.index = dict(zip(map(tuple, np.sort(self.edges, axis=1).tolist()), range(len(self.edges))))  # _key of each edge
 
     def copy(self) -> "MotionGraph":
         """An independent copy, cheap: the arrays are only ever replaced (never written in place), so they are shared;

@@ -17,6 +17,7 @@ pairs and every pair of a hand whose fingers are not at the roadmap's hold confi
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import coal
@@ -40,7 +41,12 @@ class Situation:
 
     def object_pose(self, palm: np.ndarray) -> np.ndarray:
         """The object's world pose given the holder's palm pose (ignored when static)."""
-        return self.pose if self.holder is None else palm @ np.linalg.inv(self.pose)
+        return self.pose if self.holder is None else palm @ self._grasp_inverse
+
+    @functools.cached_property
+    def _grasp_inverse(self) -> np.ndarray:
+        """pose⁻¹, inverted once: a carried object is posed at every sample of the trajectory."""
+        return np.linalg.inv(self.pose)
 
 
 def fingertip_geometries(cm: CollisionModel, arm: str, fingers: list[str]) -> tuple[str, ...]:

@@ -14,6 +14,8 @@ first) so that colliding segments fail early.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..collision import CollisionModel
@@ -31,8 +33,10 @@ def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.nd
     radii = np.zeros((len(cm.geometry.geometryObjects), model.nq))
     skip = 0 if known is None else len(known)
     radii[:skip] = known
-    for g, obj in enumerate(cm.geometry.geometryObjects):
-        if g < skip or obj.parentJoint == 0:
+    objects = cm.geometry.geometryObjects
+    for g in range(skip, len(objects)):
+        obj = objects[g]
+        if obj.parentJoint == 0:
             continue  # fixed in the world (obstacles, a static object): no joint moves it
         axes = cm.robot.joint_axes
         geom = obj.geometry
@@ -53,10 +57,12 @@ def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.nd
     return radii
 
 
+@functools.lru_cache(maxsize=4096)
 def van_der_corput(n: int) -> np.ndarray:
-    """The n parameters 0, 1/(n-1), ..., 1 in bisection order: ends first, then midpoints, coarse to fine."""
+    """The n parameters 0, 1/(n-1), ..., 1 in bisection order: ends first, then midpoints, coarse to fine (read-only:
+    computed once per n, as every segment of n checks asks for the same order)."""
     if n <= 1:
-        return np.zeros(max(n, 0))
+        return _read_only(np.zeros(max(n, 0)))
     order = [0, n - 1]
     intervals = [(0, n - 1)]
     while intervals:
@@ -67,7 +73,12 @@ def van_der_corput(n: int) -> np.ndarray:
                 order.append(m)
                 finer += [(a, m), (m, b)]
         intervals = finer
-    return np.asarray(order, dtype=float) / (n - 1)
+    return _read_only(np.asarray(order, dtype=float) / (n - 1))
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
 
 
 def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, object_clearance: float = 0.0) -> np.ndarray:
@@ -121,9 +132,7 @@ class SegmentChecker:
     def first_hit(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> np.ndarray | None:
         """The first configuration of the segment, in checking order, whose check fails; None when all pass."""
         s = van_der_corput(int(self.steps(qa, qb, subset)[0]))
-        dq = qb - qa
-        for t in s if ends else s[2:]:
-            q = qa + t * dq
+        for q in qa + np.outer(s if ends else s[2:], qb - qa):
             if self.checker.in_collision(q, subset):
                 return q
         return None
