@@ -137,6 +137,8 @@ class MotionBench:
         ours, rrt = (self.summary(p) for p in ("roadmap", "rrt"))
         return {"seeds": self.seeds, "ours_total_seconds_median": ours["seconds"], "rrt_total_seconds_median": rrt["seconds"],
                 "speedup": rrt["seconds"] / ours["seconds"] if ours["seconds"] > 0 else None,
+                "ours_transit_checks_median": ours["transit_checks"], "rrt_transit_checks_median": rrt["transit_checks"],
+                "check_ratio": rrt["transit_checks"] / ours["transit_checks"] if ours["transit_checks"] > 0 else None,
                 "ours_success": ours["success"], "rrt_success": rrt["success"],
                 "phases": {"ours": ours["phases"], "rrt": rrt["phases"]}, "runs": self.runs}
 
@@ -158,8 +160,10 @@ class MotionBench:
                            "seconds": _median([sum(r["phase_seconds"][per * i: per * (i + 1)]) for r in runs if r["phase_seconds"]]),
                            "edges_invalidated": _median([r["edges_invalidated"] for r in rows]),
                            "rrt_calls": _median([r["rrt_calls"] for r in rows]),
+                           "transit_checks": _median([r["transit_checks"] for r in rows]),
                            "path_length": _median([r["path_length"] for r in rows]), "duration": _median([r["duration"] for r in rows])})
         return {"seconds": _median([r["seconds"] for r in runs]), "success": sum(r["success"] for r in runs) / len(runs),
+                "transit_checks": _median([sum(p["transit_checks"] for p in r["phases"]) for r in runs if r["phases"]]),
                 "phases": phases, "where": self.where(planner)}
 
     def where(self, planner: str) -> dict:
@@ -184,18 +188,21 @@ class MotionBench:
         out = []
         for planner, title in (("roadmap", "ours: Super Graph, lazy revalidation, RRT reconnection"), ("rrt", "RRTConnect alone")):
             s = self.summary(planner)
-            out += [f"{title}: median {s['seconds']:.2f} s over {len(self.seeds)} seeds, success {s['success']:.0%}",
+            out += [f"{title}: median {s['seconds']:.2f} s over {len(self.seeds)} seeds, success {s['success']:.0%}, "
+                    f"{s['transit_checks']:.0f} transit collision checks",
                     f"{'phase':<7}{'nodes plan':>11}{'s plan':>8}{'nodes val':>10}{'s val':>8}{'invalid':>8}{'RRT':>5}"
-                    f"{'s total':>9}{'success':>8}{'length':>8}{'duration':>9}"]
+                    f"{'checks':>8}{'s total':>9}{'success':>8}{'length':>8}{'duration':>9}"]
             for r in s["phases"]:
                 out.append(f"{r['phase']:<7}{r['nodes_planning']:>11.0f}{r['seconds_planning']:>8.2f}{r['nodes_validating']:>10.0f}"
-                           f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['rrt_calls']:>5.0f}{r['seconds']:>9.2f}"
-                           f"{r['success']:>8.0%}{r['path_length']:>8.2f}{r['duration']:>9.2f}")
+                           f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['rrt_calls']:>5.0f}{r['transit_checks']:>8.0f}"
+                           f"{r['seconds']:>9.2f}{r['success']:>8.0%}{r['path_length']:>8.2f}{r['duration']:>9.2f}")
             out.append("where the time goes (median s): " + ", ".join(f"{k} {v:.2f}" for k, v in s["where"].items())
                        + " (other: the wall time minus the rest; below 0 when the phases' transits ran in parallel)")
             out.append("")
         d = self.to_dict()
         out.append(f"speedup (RRTConnect median / ours): {d['speedup']:.2f}" if d["speedup"] else "speedup: n/a")
+        if d["check_ratio"]:
+            out.append(f"transit collision checks (RRTConnect median / ours): {d['check_ratio']:.2f} (a count: the same on any machine)")
         return "\n".join(out)
 
 

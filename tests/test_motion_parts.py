@@ -462,3 +462,34 @@ def test_paddings_fitted_pair_by_pair():
         else:
             assert tight.samples(q, qb) == plain.samples(q, qb), f"joint {j} does not move it: as sparse as the plain profile"
     assert moves.any() and not moves.all(), "the segments must include both cases"
+
+
+@pytest.mark.parametrize("baseline", [False, True], ids=["roadmap", "rrt"])
+def test_transit_checks_count_every_collision_check_of_the_transit(example, monkeypatch, baseline):
+    """Table I's transit checks are every collision check a transit makes, counted apart from the planner's own tally:
+    each call of the collision checker while the transit runs. The example's Rest transit, from where the placing hand
+    retreated (near the object: some pairs checked densely) to the final configuration."""
+    from planner.collision import CollisionChecker, build_collision_model
+    from planner.motion.graph import MotionGraph
+    from planner.motion.phases import PhasePlanner
+    from planner.motion.result import PHASES
+    from planner.motion.situation import Situation
+    from planner.motion.step import contact_profile
+    from planner.motion.validity import transit_profile
+    from planner.session import Session
+
+    scene, roadmap, _ = example
+    robot, p = scene.robot, MotionParams()
+    motion = Session.open(EXAMPLE).result("motion")
+    rest = np.flatnonzero(motion.phase == PHASES.index("Rest"))
+    start = motion.q[rest[0] - 1]
+    hands = np.concatenate(list(robot.hand_idx.values()))
+    goal = motion.q[rest[np.flatnonzero(np.all(motion.q[rest][:, hands] == start[hands], axis=1))[-1]]]
+    planner = PhasePlanner(scene, build_collision_model(robot, scene.environment), MotionGraph(roadmap),
+                           transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
+                           np.random.default_rng(0), baseline)
+    calls = []
+    check = CollisionChecker.in_collision
+    monkeypatch.setattr(CollisionChecker, "in_collision", lambda self, *a, **k: calls.append(1) or check(self, *a, **k))
+    planner.transit(3, start, goal, Situation(None, scene.object_final))
+    assert planner.stats[3].checks == len(calls) > 2, (planner.stats[3].checks, len(calls))

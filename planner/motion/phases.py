@@ -442,6 +442,17 @@ class PhasePlanner:
         full = self.validity(model, self.transit_profile)
         near = self.validity(model, self.transit_profile, self.meter(model).fitted_pairs(self.transit_profile, closest))
         # near: what touches the ends, the pairs they hold close checked as densely as those need
+        stats = self.stats[phase]
+        checkers = {id(v.seg): v.seg for v in (full, near)}.values()  # one when no pair is fitted
+        before = sum(c.checks for c in checkers)
+        try:
+            return self._transit(phase, part, q_start, q_goal, situation, space, full, near, arm)
+        finally:
+            stats.checks += sum(c.checks for c in checkers) - before
+
+    def _transit(self, phase: int, part: str, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, space: JointSpace,
+                 full: Validity, near: Validity, arm: str | None) -> Piece:
+        """The transit's path, its ends checked first (see transit)."""
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not near.state_valid(q):
                 raise PieceFailed(phase, part, f"its {name} configuration collides ({_pairs(near.first_collision(q[None]))})")

@@ -122,6 +122,7 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
         seg = q[sel[0] - 1 if sel[0] else 0: sel[-1] + 1] if len(sel) else q[:0]
         table.append({"phase": PHASES[i], "nodes_planning": st.nodes_planning, "nodes_validating": st.nodes_validating,
                       "edges_invalidated": st.edges_invalidated, "rrt_calls": st.rrt_calls, "searches": st.searches,
+                      "transit_checks": st.checks,
                       "path_length": round(float(np.linalg.norm(np.diff(seg, axis=0), axis=1).sum()), 4),
                       "duration": round(float(len(sel) * dt), 4)})
     stages = []

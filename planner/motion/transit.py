@@ -60,6 +60,7 @@ class TransitStats:
     edges_invalidated: int = 0
     rrt_calls: int = 0
     searches: int = 0
+    checks: int = 0  # collision checks of the transits (their ends, connecting, validating, reconnecting, shortcutting)
 
 
 class TransitFailed(Exception):

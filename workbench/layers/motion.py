@@ -59,6 +59,7 @@ def table_one(result: Motion, seconds: list[float] | None) -> str:
              for j, stage in enumerate(PHASE_SECONDS)]
     rows += [("edges invalidated", [str(p["edges_invalidated"]) for p in phases]),
              ("RRT calls", [str(p["rrt_calls"]) for p in phases]),
+             ("transit checks", [str(p.get("transit_checks", "–")) for p in phases]),  # sessions before they were counted: '–'
              ("length (rad)", [f"{p['path_length']:.2f}" for p in phases]),
              ("duration (s)", [f"{p['duration']:.2f}" for p in phases])]
     head = "| | " + " | ".join(p["phase"] for p in phases) + " |\n|---|" + "---:|" * len(phases)
