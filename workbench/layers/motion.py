@@ -50,7 +50,7 @@ def route_segments(result: Motion) -> tuple[np.ndarray, np.ndarray]:
 def table_one(result: Motion, seconds: list[float] | None) -> str:
     """Table I of the session as markdown, one column per phase: nodes added planning / validating, the seconds of
     planning, validating, reconnecting, shortcutting and contact motions (from the session record; '–' when absent),
-    edges invalidated, RRT calls, path length and duration."""
+    edges invalidated, RRT calls, transit collision checks, path length and duration."""
     phases, per = result.phases, len(PHASE_SECONDS)
     secs = seconds if seconds and len(seconds) >= per * len(phases) else None
     rows = [("nodes planning", [str(p["nodes_planning"]) for p in phases]),
