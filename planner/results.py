@@ -76,6 +76,12 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode())
 
 
+def frozen(a: np.ndarray) -> np.ndarray:
+    """`a` itself, made read-only: an array shared after it is built (a robot's, a planner's result, a memoised order)."""
+    a.setflags(write=False)
+    return a
+
+
 def read_only(result: R) -> R:
     """`result` with its array fields made read-only (results are immutable once built, like loaded ones)."""
     for f in dataclasses.fields(result):

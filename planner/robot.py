@@ -15,6 +15,7 @@ import pinocchio as pin
 
 from .errors import InputError
 from .paths import robot_data_share
+from .results import frozen
 from .robot_spec import RobotSpec, load_robot_spec, rest_configuration_of
 
 
@@ -112,12 +113,6 @@ def joint_axes(model: pin.Model) -> np.ndarray:
     for j in range(1, model.njoints):
         axes[j] = pin.getJointJacobian(model, data, j, pin.LOCAL)[3:, model.joints[j].idx_v]
     return axes
-
-
-def _read_only(a: np.ndarray) -> np.ndarray:
-    """`a`, made read-only: the robot is shared, nobody may write into its arrays."""
-    a.setflags(write=False)
-    return a
 
 
 def _prefixed_urdf(path: Path, prefix: str) -> str:
@@ -274,9 +269,9 @@ def build_robot(spec: RobotSpec) -> Robot:
         fld = owner[bad[0]].replace(".joints", ".rest").replace(".hand.fingers", ".hand.fingers.open").replace("torso_joints", "torso_rest")
         names = ", ".join(f"{robot_joint_name(model, i)} = {q_rest[i]:.4g} not in [{lower[i]:.4g}, {upper[i]:.4g}]" for i in bad)
         raise InputError(spec.source, fld, f"rest configuration outside the joint limits: {names}")
-    return Robot(spec, model, coll, vis, _read_only(lower), _read_only(upper), _read_only(q_rest), _read_only(torso_idx),
-                 {a: _read_only(i) for a, i in arm_idx.items()}, {a: _read_only(i) for a, i in hand_idx.items()},
-                 {a: {f: _read_only(i) for f, i in fi.items()} for a, fi in finger_idx.items()}, _read_only(joint_axes(model)))
+    return Robot(spec, model, coll, vis, frozen(lower), frozen(upper), frozen(q_rest), frozen(torso_idx),
+                 {a: frozen(i) for a, i in arm_idx.items()}, {a: frozen(i) for a, i in hand_idx.items()},
+                 {a: {f: frozen(i) for f, i in fi.items()} for a, fi in finger_idx.items()}, frozen(joint_axes(model)))
 
 
 @functools.lru_cache(maxsize=8)

@@ -18,6 +18,8 @@ from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 
+from ..results import frozen
+
 StateValid = Callable[[np.ndarray], bool]
 MotionValid = Callable[[np.ndarray, np.ndarray], bool]
 
@@ -127,9 +129,9 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
     if goals.ndim != 2 or goals.shape[1] != d or not np.all((goals >= lower) & (goals <= upper)):
         raise ValueError(f"more_goals must be (k, {d}) states within the bounds")
     if not state_valid(start.copy()):
-        return RRTResult(False, _frozen(np.empty((0, d))), 0, 0.0, "start invalid")
+        return RRTResult(False, frozen(np.empty((0, d))), 0, 0.0, "start invalid")
     if not state_valid(goal.copy()):
-        return RRTResult(False, _frozen(np.empty((0, d))), 0, 0.0, "goal invalid")
+        return RRTResult(False, frozen(np.empty((0, d))), 0, 0.0, "goal invalid")
 
     with _ompl_log_level(ou.LOG_WARN):
         # setSeed after OMPL's first random number logs an error but does reseed the generator that
@@ -177,15 +179,11 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
         if kind == ob.PlannerStatus.EXACT_SOLUTION:
             path = pdef.getSolutionPath()
             waypoints = np.array([path.getState(i)[0:d] for i in range(path.getStateCount())], dtype=float)
-            return RRTResult(True, _frozen(waypoints), states, seconds, "")
+            return RRTResult(True, frozen(waypoints), states, seconds, "")
     if kind in (ob.PlannerStatus.TIMEOUT, ob.PlannerStatus.APPROXIMATE_SOLUTION):
         message = f"no path within {time_limit:g} s" if max_motions is None else f"no path within {max_motions} motion checks"
     else:
         message = f"RRTConnect stopped: {status.asString()}"
-    return RRTResult(False, _frozen(np.empty((0, d))), states, seconds, message)
+    return RRTResult(False, frozen(np.empty((0, d))), states, seconds, message)
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
-    """`a` made read-only, so a result stays as the planner returned it."""
-    a.setflags(write=False)
-    return a

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..results import frozen
+
 
 @dataclass(frozen=True, eq=False)
 class JointSpace:
@@ -24,7 +26,7 @@ class JointSpace:
     def of(robot_lower: np.ndarray, robot_upper: np.ndarray, idx: np.ndarray, base: np.ndarray) -> "JointSpace":
         """The space moving `idx` of a robot with these joint limits, the rest at `base`."""
         idx = np.asarray(idx, dtype=np.int64)
-        return JointSpace(_frozen(idx), _frozen(robot_lower[idx]), _frozen(robot_upper[idx]), _frozen(base))
+        return JointSpace(*(frozen(np.array(a)) for a in (idx, robot_lower[idx], robot_upper[idx], base)))
 
     @property
     def dimension(self) -> int:
@@ -54,9 +56,3 @@ class JointSpace:
     @staticmethod
     def interpolate(qa: np.ndarray, qb: np.ndarray, s: float) -> np.ndarray:
         return qa + s * (qb - qa)
-
-
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a = np.array(a)
-    a.setflags(write=False)
-    return a

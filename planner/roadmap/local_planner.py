@@ -19,6 +19,7 @@ import functools
 import numpy as np
 
 from ..collision import CollisionModel
+from ..results import frozen
 
 
 def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.ndarray:
@@ -62,7 +63,7 @@ def van_der_corput(n: int) -> np.ndarray:
     """The n parameters 0, 1/(n-1), ..., 1 in bisection order: ends first, then midpoints, coarse to fine (read-only:
     computed once per n, as every segment of n checks asks for the same order)."""
     if n <= 1:
-        return _read_only(np.zeros(max(n, 0)))
+        return frozen(np.zeros(max(n, 0)))
     order = [0, n - 1]
     intervals = [(0, n - 1)]
     while intervals:
@@ -73,12 +74,7 @@ def van_der_corput(n: int) -> np.ndarray:
                 order.append(m)
                 finer += [(a, m), (m, b)]
         intervals = finer
-    return _read_only(np.asarray(order, dtype=float) / (n - 1))
-
-
-def _read_only(a: np.ndarray) -> np.ndarray:
-    a.setflags(write=False)
-    return a
+    return frozen(np.asarray(order, dtype=float) / (n - 1))
 
 
 def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, object_clearance: float = 0.0) -> np.ndarray:
