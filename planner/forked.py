@@ -5,7 +5,8 @@ only the results travel back, pickled. Falls back to running inline where fork i
 
 Workers never outlive their parent: each asks the kernel for SIGKILL when the thread that forked
 it dies (Linux `PR_SET_PDEATHSIG`, so even `kill -9` of the parent ends them), a pool left by an
-exception (Ctrl-C, SIGTERM turned into `Terminated`) is killed rather than waited for, and
+exception (Ctrl-C, SIGTERM turned into `Terminated`) is killed rather than waited for (its workers are
+forked together, those signals held until every one is in the pool's map), and
 `stop_pools(thread)` kills the live pools a thread made (the workbench's background run, when it shuts down).
 """
 from __future__ import annotations
@@ -27,6 +28,7 @@ PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
 _LIVE: dict[concurrent.futures.ProcessPoolExecutor, threading.Thread] = {}  # live pools, by the thread that made them
 _LIVE_LOCK = threading.Lock()
+_SPAWN_LOCK = threading.Lock()  # held while a pool forks its workers
 
 
 class Terminated(KeyboardInterrupt):
@@ -69,9 +71,34 @@ def _child_init(parent: int, initializer: Callable[..., None] | None, initargs: 
         initializer(*initargs)
 
 
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """In the main thread: SIGTERM and SIGINT that arrive inside are handled on the way out, not in the middle.
+
+    A worker forked but not yet entered in its pool's map would escape `_kill` (it died only later, by its
+    parent-death signal, after the parent had already exited)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: arrived.append(signum)) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(arrived):
+            handler = previous[s]
+            if callable(handler):
+                handler(s, None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(s)
+
+
 def _kill(pool: concurrent.futures.ProcessPoolExecutor) -> None:
     """Kill a pool's workers (not wait for their jobs) and release it."""
-    processes = list((getattr(pool, "_processes", None) or {}).values())  # CPython's map of the pool's workers
+    with _SPAWN_LOCK:  # a pool forking in another thread has entered all its workers in its map first
+        processes = list((getattr(pool, "_processes", None) or {}).values())  # CPython's map of the pool's workers
     for p in processes:
         with contextlib.suppress(OSError, ValueError):
             p.kill()
@@ -98,12 +125,13 @@ def worker_pool(workers: int, initializer: Callable[..., None] | None = None, in
     with _LIVE_LOCK:
         _LIVE[pool] = threading.current_thread()
     try:
+        with _SPAWN_LOCK, _signals_deferred():
+            pool.submit(int)  # with fork, CPython forks every worker at the first job
         yield pool
+        pool.shutdown(wait=True)
     except BaseException:
         _kill(pool)
         raise
-    else:
-        pool.shutdown(wait=True)
     finally:
         with _LIVE_LOCK:
             _LIVE.pop(pool, None)

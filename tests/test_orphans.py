@@ -135,3 +135,30 @@ def test_worker_pool_kills_its_workers_when_the_caller_raises() -> None:
         workers = _children(os.getpid()) - before
         raise KeyboardInterrupt
     assert not any(_running(w) for w in workers)
+
+
+def test_sigterm_while_a_pool_forks_kills_every_worker() -> None:
+    """SIGTERM right after a pool's second fork (before CPython enters that worker in the pool's map): the pool has killed
+    and reaped both workers when the exception leaves it (a worker left to die later outlived `regrasp plan` in CI)."""
+    from planner.forked import Terminated, sigterm_unwinds, worker_pool
+
+    before = _children(os.getpid())
+    forked: list[set[int]] = []
+    armed = [True]
+
+    def after_fork() -> None:
+        if armed[0]:
+            forked.append(_children(os.getpid()) - before)
+            if len(forked) == 2:
+                armed[0] = False
+                os.kill(os.getpid(), signal.SIGTERM)
+
+    os.register_at_fork(after_in_parent=after_fork)  # it cannot be removed: disarmed once it has fired
+    try:
+        with pytest.raises(Terminated), sigterm_unwinds(), worker_pool(2) as pool:
+            pool.submit(time.sleep, 600)
+    finally:
+        armed[0] = False
+    workers = forked[-1]
+    left = sorted(w for w in workers if Path(f"/proc/{w}").exists())
+    assert len(workers) == 2 and left == [], f"workers {left} not reaped by the pool"
