@@ -102,10 +102,13 @@ def _kill(pool: concurrent.futures.ProcessPoolExecutor) -> None:
     for p in processes:
         with contextlib.suppress(OSError, ValueError):
             p.kill()
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         with contextlib.suppress(OSError, ValueError, AssertionError):
             p.join()
+    if manager is not None:  # it closes its wake-up pipe as it ends; at exit, CPython writes to the pipes of those still
+        manager.join()  # running without a lock ("Bad file descriptor" after a SIGTERM in CI)
 
 
 def stop_pools(thread: threading.Thread) -> None:
