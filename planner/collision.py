@@ -289,23 +289,23 @@ def joint_support(model: pin.Model, parents: list[int]) -> np.ndarray:
     return support
 
 
+def pair_table(cm: CollisionModel, per_pair: np.ndarray) -> np.ndarray:
+    """(n_geometries, n_geometries) symmetric table of a per-pair value, as pinocchio sets pair flags and margins in one
+    call (a Python loop over thousands of pairs cost more than checking a short motion)."""
+    n = len(cm.geometry.geometryObjects)
+    out = np.zeros((n, n), dtype=per_pair.dtype)
+    out[cm.ends[:, 0], cm.ends[:, 1]] = per_pair
+    out[cm.ends[:, 1], cm.ends[:, 0]] = per_pair
+    return out
+
+
 def geometry_data(cm: CollisionModel, subset: str) -> pin.GeometryData:
-    """Fresh collision data of `cm` with only the subset's pairs active, each padded as the model says (see paddings)
-    (set with one call each: a Python loop over thousands of pairs cost more than checking a short motion)."""
-    gm, ends = cm.geometry, cm.ends
-    n = len(gm.geometryObjects)
-
-    def table(per_pair: np.ndarray) -> np.ndarray:
-        out = np.zeros((n, n), dtype=per_pair.dtype)
-        out[ends[:, 0], ends[:, 1]] = per_pair
-        out[ends[:, 1], ends[:, 0]] = per_pair
-        return out
-
-    active = np.zeros(len(ends), dtype=bool)
+    """Fresh collision data of `cm` with only the subset's pairs active, each padded as the model says (see paddings)."""
+    active = np.zeros(len(cm.ends), dtype=bool)
     active[cm.subsets[subset]] = True
-    gd = pin.GeometryData(gm)
-    gd.setActiveCollisionPairs(gm, table(active), True)
-    gd.setSecurityMargins(gm, table(cm.paddings()), True, False)
+    gd = pin.GeometryData(cm.geometry)
+    gd.setActiveCollisionPairs(cm.geometry, pair_table(cm, active), True)
+    gd.setSecurityMargins(cm.geometry, pair_table(cm, cm.paddings()), True, False)
     return gd
 
 
@@ -318,22 +318,32 @@ class CollisionChecker:
         self.data = self.model.createData()
         self._gdata: dict[str, pin.GeometryData] = {}
         self._managers: dict[str, object] = {}
+        self._margins: dict[str, np.ndarray | None] = {}  # per subset: the margins table its data has (None: the model's)
+        self._own_margins: np.ndarray | None = None
         self.checks = 0
 
-    def _subset(self, subset: str) -> tuple[pin.GeometryData, object]:
+    def _subset(self, subset: str, margins: np.ndarray | None = None) -> tuple[pin.GeometryData, object]:
         if subset not in self._managers:
             if subset not in self.cm.subsets:
                 raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
             gd = geometry_data(self.cm, subset)
             self._gdata[subset] = gd
             self._managers[subset] = pin.BroadPhaseManager_SSaPCollisionManager(self.model, self.cm.geometry, gd)
+            self._margins[subset] = None
+        if self._margins[subset] is not margins:  # a few microseconds, against tens for a check
+            if margins is None and self._own_margins is None:
+                self._own_margins = pair_table(self.cm, self.cm.paddings())
+            self._gdata[subset].setSecurityMargins(self.cm.geometry, self._own_margins if margins is None else margins, True, False)
+            self._margins[subset] = margins
         return self._gdata[subset], self._managers[subset]
 
-    def in_collision(self, q: np.ndarray, subset: str = "all", placed: Mapping[int, np.ndarray] | None = None) -> bool:
+    def in_collision(self, q: np.ndarray, subset: str = "all", placed: Mapping[int, np.ndarray] | None = None,
+                     margins: np.ndarray | None = None) -> bool:
         """True if any pair of the subset collides at q; `placed` (geometry index -> world pose) moves fixed geometries
-        for this call, in this checker's own data: the shared model is never written."""
+        for this call, in this checker's own data: the shared model is never written; `margins` (a `pair_table` of
+        paddings) pads the pairs otherwise than the model says, for this call."""
         self.checks += 1
-        gd, manager = self._subset(subset)
+        gd, manager = self._subset(subset, margins)
         if not placed:
             return bool(pin.computeCollisions(self.model, self.data, manager, q, True))
         pin.updateGeometryPlacements(self.model, self.data, self.cm.geometry, gd, q)

@@ -18,7 +18,7 @@ from planner.results import save_result
 from planner.roadmap import Roadmap, RoadmapParams, RoadmapPlanner, roadmap_for
 from planner.roadmap import build as roadmap_build
 from planner.roadmap.build import build_roadmap, roadmap_collision_model, segment_checker
-from planner.roadmap.local_planner import van_der_corput
+from planner.roadmap.local_planner import SegmentChecker, coarse_first, van_der_corput
 from planner.roadmap.step import session_roadmap_seed
 from planner.roadmap.super_graph import components
 
@@ -96,8 +96,10 @@ def test_super_graph_structure(small):
     assert small.wrists.shape == (len(small.node_q), len(arms), 3)
 
 
-def test_thin_wall_between_two_configurations_is_never_crossed(default_scene):
-    """A 4 mm wall across a straight arm motion, wherever it stands along the motion, stops the segment."""
+@pytest.mark.parametrize("coarse", [1, 3, 5])
+def test_thin_wall_between_two_configurations_is_never_crossed(default_scene, coarse):
+    """A 4 mm wall across a straight arm motion, wherever it stands along the motion, stops the segment, also when the
+    segment is checked coarse first (the wall lies between two coarse checks: only the dense ones near it can see it)."""
     robot = default_scene.robot
     arm = robot.spec.arms[0]
     idx = robot.arm_idx[arm.name]
@@ -107,15 +109,18 @@ def test_thin_wall_between_two_configurations_is_never_crossed(default_scene):
     qb = qa.copy()
     qb[idx[2]] -= 1.2  # the hand sweeps sideways
     subset = f"sub/{arm.name}"
+    def checker(cm):  # the roadmap's own local planner, or one checking coarse first
+        return segment_checker(cm, SMALL) if coarse == 1 else SegmentChecker(cm, SMALL.env_clearance, coarse=coarse)
+
     cm, _ = roadmap_collision_model(default_scene, SMALL)
-    assert segment_checker(cm, SMALL).segment_free(qa, qb, subset), "without the wall the motion is free"
+    assert checker(cm).segment_free(qa, qb, subset), "without the wall the motion is free"
     palm = arm.hand.prefixed(arm.hand.palm_frame)
     for t in np.linspace(0.35, 0.65, 7):
         p0, p1 = (robot.frame_placement(qa + s * (qb - qa), palm)[:3, 3] for s in (t - 0.01, t + 0.01))
         yaw = np.arctan2(*(p1 - p0)[1::-1])
         wall = Obstacle("wall", "box", (0.004, 0.08, 0.08), pose((p0 + p1) / 2, (0.0, 0.0, yaw)))  # thin along the motion
         cm, _ = roadmap_collision_model(dataclasses.replace(default_scene, environment=(wall,)), SMALL)
-        seg = segment_checker(cm, SMALL)
+        seg = checker(cm)
         assert seg.free(qa, subset) and seg.free(qb, subset), "the wall must leave both ends free"
         assert not seg.segment_free(qa, qb, subset), f"the wall at {t:.2f} of the motion was missed"
 
@@ -211,3 +216,32 @@ def test_default_super_graph_size(default_scene, oracle):
     rng = np.random.default_rng(0)
     for u, v in roadmap.edges[rng.choice(len(roadmap.edges), 40, replace=False)]:
         assert not _segment_collisions(oracle, roadmap.node_q[u], roadmap.node_q[v])
+
+
+def test_coarse_first_never_passes_a_segment_that_comes_nearer_than_the_clearance():
+    """Analytic: along a segment checked at n configurations, a pair's distance d(s) changes by at most 2 (p - c) between
+    two of them (the resolution's bound). With clearance c = 0 and padding p = 1, a check fails where d < 1, a coarse one
+    where d < k. A V-shaped dip as steep as the bound, anywhere, to any depth: the segment passes only if d stays >= c,
+    and always passes when d stays >= p; far from everything it costs only the coarse checks."""
+    rng = np.random.default_rng(5)
+    for _ in range(3000):
+        n, k = int(rng.integers(8, 80)), int(rng.integers(2, 6))
+        s0, depth = rng.uniform(-0.2, 1.2), rng.uniform(-0.5, 1.5)
+
+        def d(s):
+            return depth + 2.0 * (n - 1) * abs(s - s0)
+
+        calls = []
+
+        def hits(s, coarse):
+            calls.append(s)
+            return d(s) < (k if coarse else 1.0)
+
+        nearest = min(d(s) for s in np.linspace(0.0, 1.0, 20 * n))
+        passed = coarse_first(n, k, hits) is None
+        if passed:
+            assert nearest >= 0.0, f"n={n} k={k}: passed with the pair {-nearest:.3f} deep"
+        if nearest >= 1.0:
+            assert passed, f"n={n} k={k}: failed though the pair stays beyond its padding"
+        if nearest >= k:
+            assert len(calls) == -(-(n - 1) // k) + 1 < n

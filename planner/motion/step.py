@@ -6,7 +6,10 @@ step's session record, never into the result, so the result depends on the input
 """
 from __future__ import annotations
 
+import contextlib
+import gc
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pinocchio as pin
@@ -29,7 +32,7 @@ PLANNERS = ("roadmap", "rrt")
 def contact_profile(p: MotionParams) -> Profile:
     """The paddings of the motions that touch the object (see validity.py)."""
     return Profile("contact", p.contact_env_padding, p.contact_env_clearance, 0.0, -p.contact_penetration, 0.0,
-                   -p.contact_penetration)
+                   -p.contact_penetration, p.contact_coarse)
 
 
 def hand_grasp(grasps: GraspList, rank: int) -> HandGrasp:
@@ -37,11 +40,33 @@ def hand_grasp(grasps: GraspList, rank: int) -> HandGrasp:
                      [f for f, m in zip(grasps.fingers, grasps.contact_mask[rank]) if m])
 
 
+@contextlib.contextmanager
+def collector_paused() -> Iterator[None]:
+    """Python's cyclic garbage collector off inside (as it was on the way out): its full passes walk every object of the
+    long-lived models (about 50 ms per plan on the default task), and in a forked worker the walk copies the pages the
+    worker shares with its parent. A plan's few reference cycles are collected once it is done."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
 def plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps, roadmap: Roadmap, p: MotionParams,
                 rng: np.random.Generator, progress: Progress = no_progress) -> tuple[Motion, list[float]]:
     """(the motion, its stage seconds): the first double grasp, best first, whose whole motion is valid."""
     if p.planner not in PLANNERS:
         raise ValueError(f"motion.planner must be one of {', '.join(PLANNERS)}, got '{p.planner}'")
+    if p.contact_coarse < 1:
+        raise ValueError(f"motion.contact_coarse must be a whole number >= 1, got {p.contact_coarse}")
+    with collector_paused():
+        return _plan_motion(scene, pick, place, dg, roadmap, p, rng, progress)
+
+
+def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps, roadmap: Roadmap, p: MotionParams,
+                 rng: np.random.Generator, progress: Progress) -> tuple[Motion, list[float]]:
     robot = scene.robot
     cm = build_collision_model(robot, scene.environment)
     transit = transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding)
@@ -63,7 +88,9 @@ def plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasp
         tried.append("")
         break
     resolution = {"transit": transit.describe(), "contact": contact.describe(),
-                  "bound": "largest displacement of any robot or carried-object point, relative to what it may hit, between two checks"}
+                  "bound": "largest displacement of any robot or carried-object point, relative to what it may hit, between two "
+                           "checks (coarse times that between two checks that found nothing within coarse times a padding's "
+                           "margin over its clearance)"}
     if pieces is None:
         failure = f"no valid motion for any of the {count} double grasps tried: " + "; ".join(
             f"{i + 1}: {why}" for i, why in enumerate(tried)) if count else "no double grasp to move with"

@@ -47,9 +47,12 @@ class Profile:
     self_clearance: float
     object_padding: float  # robot–object pairs
     object_clearance: float
+    coarse: int = 1  # segments checked coarse first at this factor (see roadmap/local_planner.py); 1: densely throughout
 
     def describe(self) -> dict:
-        """The paddings and clearances, and the largest relative displacement between two checks of each kind of pair."""
+        """The paddings and clearances, and the largest relative displacement between two checks of each kind of pair (and
+        `coarse` times that between two checks that found nothing within `coarse` times a padding's margin over its
+        clearance)."""
         return {**{k: v for k, v in dataclasses.asdict(self).items() if k != "name"},
                 "obstacle_step_m": round(2 * (self.env_padding - self.env_clearance), 6),
                 "robot_step_m": round(2 * (self.self_padding - self.self_clearance), 6),
@@ -201,4 +204,4 @@ def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all", kno
                                                             self_padding=profile.self_padding, object_padding=profile.object_padding),
                              pair_padding=pair_padding)
     return Validity(SegmentChecker(cm, profile.env_clearance, profile.self_clearance, profile.object_clearance,
-                                   geometry_radii(cm, known_radii)), profile, subset)
+                                   geometry_radii(cm, known_radii), profile.coarse), profile, subset)
