@@ -7,9 +7,9 @@ SRDF's disable_collisions) are disabled; pairs never within `prune_margin` over 
 uniform samples are pruned. The pair set is computed once per robot spec and cached. Pairs between
 the two arms (hands included) are never pruned: the arms share a workspace, and uniform samples
 rarely bring the hands together. Robot-obstacle pairs collide within `env_padding` (a security
-margin, which the broad phase inflates its boxes by). A check runs pinocchio's sweep-and-prune
-(SSaP) broad phase over the pairs of the requested subset
-(measured faster here than its dynamic AABB tree).
+margin, which the broad phase inflates its boxes by). A check runs pinocchio's naive broad phase (every
+pair of boxes, then the subset's pairs whose boxes meet): with some seventy geometries, measured over the
+motion step's checks, 10% faster than sweep-and-prune and 20% faster than a dynamic AABB tree.
 """
 from __future__ import annotations
 
@@ -328,7 +328,7 @@ class CollisionChecker:
                 raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
             gd = geometry_data(self.cm, subset)
             self._gdata[subset] = gd
-            self._managers[subset] = pin.BroadPhaseManager_SSaPCollisionManager(self.model, self.cm.geometry, gd)
+            self._managers[subset] = pin.BroadPhaseManager_NaiveCollisionManager(self.model, self.cm.geometry, gd)
             self._margins[subset] = None
         if self._margins[subset] is not margins:  # a few microseconds, against tens for a check
             if margins is None and self._own_margins is None:
