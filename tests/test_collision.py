@@ -117,6 +117,16 @@ def test_subsets(default_scene, default_collision):
                for p in checker.colliding_pairs(q, "hands"))
 
 
+def test_pair_ends_are_the_geometry_models_pairs(default_collision):
+    """The model's pair index (ends, 'self' before 'env') is read back from pinocchio's own pairs."""
+    cm = default_collision
+    pairs = [(cp.first, cp.second) for cp in cm.geometry.collisionPairs]
+    assert cm.ends.tolist() == [list(p) for p in pairs]
+    robot = range(cm.n_robot_geoms)
+    assert all(a in robot and b in robot for a, b in cm.ends[cm.subsets["self"]])
+    assert all((a in robot) != (b in robot) for a, b in cm.ends[cm.subsets["env"]])
+
+
 def test_environment_padding(default_scene):
     """A robot link closer to an obstacle than the padding collides; farther away it does not."""
     from planner.collision import build_collision_model

@@ -9,9 +9,9 @@ palm's joint (so the local planner's displacement bound covers its points too) a
 against the obstacles and every robot link but the holding hand's, whose pose relative to the
 object stays fixed while it is carried (it was checked when the grasp was made).
 
-Subsets: 'object' (robot–object pairs, padded by the model's object padding), the object–obstacle
-pairs join 'env'; of the pairs a motion can change (those whose relative pose depends on a moving
-joint), 'moving' is all of them and 'changed' what the offline roadmap did not check: the object's
+Pairs: only those a motion can change (whose relative pose depends on a moving joint), subset
+'moving'; of them, 'object' (robot–object pairs, padded by the model's object padding), the
+object–obstacle pairs in 'env', and 'changed' what the offline roadmap did not check: the object's
 pairs and every pair of a hand whose fingers are not at the roadmap's hold configuration.
 """
 from __future__ import annotations
@@ -104,10 +104,28 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
                "object": new_robot}
     ends = np.concatenate([cm.ends, np.array([(g, o) for g in env_partners + robot_partners], np.int64).reshape(-1, 2)])
     support = np.concatenate([cm.support, joint_support(robot.model, [gm.geometryObjects[o].parentJoint])])
-    for a in (ends, support):
-        a.setflags(write=False)  # the model is shared read-only
+    support.setflags(write=False)  # the model is shared read-only
     out = dataclasses.replace(cm, geometry=gm, subsets=subsets, ends=ends, support=support)
     changes = out.relative_joints()[:, moving].any(axis=1)
-    subsets["moving"] = np.flatnonzero(changes)
-    subsets["changed"] = np.concatenate([hand_pairs, new])[changes[np.concatenate([hand_pairs, new])]]
-    return out
+    changed = np.concatenate([hand_pairs, new])
+    return _moving_only(out, changes, changed[changes[changed]])
+
+
+def _moving_only(cm: CollisionModel, keep: np.ndarray, changed: np.ndarray) -> CollisionModel:
+    """`cm` with the pairs `keep` (a flag per pair) alone in its geometry model, ordered as pinocchio orders them (by
+    their two geometry indices), its subsets renumbered, 'moving' all of them and 'changed' the pairs `changed` (indices
+    before): a motion checks no other pair, and pinocchio's collision data of a model costs about 5 kB per pair (12 MB
+    for the whole robot's), to allocate and to free, every time a validity is made."""
+    ends = np.sort(cm.ends[keep], axis=1)
+    order = np.lexsort((ends[:, 1], ends[:, 0]))
+    ends = ends[order]
+    n = len(cm.geometry.geometryObjects)
+    table = np.zeros((n, n), dtype=bool)
+    table[ends[:, 0], ends[:, 1]] = True
+    cm.geometry.setCollisionPairs(table, True)
+    renumber = np.full(len(cm.ends), -1, dtype=np.int64)
+    renumber[np.flatnonzero(keep)[order]] = np.arange(len(ends))
+    subsets = {name: np.sort(renumber[idx][renumber[idx] >= 0]) for name, idx in cm.subsets.items()}
+    subsets["moving"], subsets["changed"] = np.arange(len(ends)), np.sort(renumber[changed])
+    ends.setflags(write=False)
+    return dataclasses.replace(cm, subsets=subsets, ends=ends)
