@@ -103,6 +103,7 @@ class PhasePlanner:
         self.transit_idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
         self.open = robot.q_rest
         self.radii = geometry_radii(cm)
+        self.situation_radii: dict[tuple[int, bytes], np.ndarray] = {}  # see validity
         self.models: dict[tuple, CollisionModel] = {}
         self.validities: dict[tuple, Validity] = {}
         self.distances: dict[int, Clearances] = {}
@@ -281,10 +282,15 @@ class PhasePlanner:
 
     def validity(self, model: CollisionModel, profile: Profile, pair_padding: tuple[tuple[int, float], ...] = ()) -> Validity:
         """The validity of a situation's model over its moving pairs, some pairs padded otherwise (see
-        Clearances.fitted_pairs); the robot's displacement radii computed once, one validity per model and paddings."""
+        Clearances.fitted_pairs); one validity per model and paddings. The displacement radii are the robot's, computed
+        once, and the object's, once for each place it hangs from (its parent joint and placement)."""
         key = (id(model), profile, pair_padding)
         if key not in self.validities:
-            self.validities[key] = make_validity(model, profile, "moving", self.radii, pair_padding)
+            held = model.geometry.geometryObjects[-1]  # the object, added last (situation_model)
+            where = (held.parentJoint, held.placement.homogeneous.tobytes())
+            if where not in self.situation_radii:
+                self.situation_radii[where] = geometry_radii(model, self.radii)
+            self.validities[key] = make_validity(model, profile, "moving", self.situation_radii[where], pair_padding)
         return self.validities[key]
 
     def backoff(self, q: np.ndarray, arm: str) -> np.ndarray:
