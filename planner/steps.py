@@ -93,7 +93,11 @@ class Step:
             if expected is float and not math.isfinite(value):
                 raise RegraspError(f"step '{self.name}': parameter {name} expects a finite number, got {value!r}")
             values[name] = value
-        return dataclasses.replace(defaults, **values)
+        params = dataclasses.replace(defaults, **values)
+        problem = params.problem() if hasattr(params, "problem") else ""  # a step's own constraints between values
+        if problem:
+            raise RegraspError(f"step '{self.name}': parameter {problem}")
+        return params
 
 
 def step_seed(seed: int, name: str) -> int:

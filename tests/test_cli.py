@@ -163,6 +163,8 @@ def test_params_lists_every_parameter_with_type_and_default():
     ("motion.rrt_motions=fast", "parameter rrt_motions expects int, got 'fast'"),
     ("exchange.keep=2.5", "parameter keep expects int"),
     ("roadmap.radius=NaN", "parameter radius expects a finite number"),
+    ("motion.planner=fast", "parameter planner must be one of roadmap, rrt, got 'fast'"),
+    ("motion.contact_coarse=0", "parameter contact_coarse must be a whole number >= 1, got 0"),
     ("arms", "--set expects step.param=value"),
 ])
 def test_every_set_is_checked_before_any_step(tmp_path, capsys, assignment, message):

@@ -8,6 +8,7 @@ import numpy as np
 from ..results import array
 
 PHASES = ("Grasp", "Carry", "Place", "Rest")
+PLANNERS = ("roadmap", "rrt")
 PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "contact")  # the step's stage seconds per phase,
 # in this order, then one for timing and sampling
 
@@ -45,6 +46,14 @@ class MotionParams:
     contact_penetration: float = 0.001  # m: hand-object pairs touch at most (0 at checks, this deep between checks)
     contact_coarse: int = 3  # contact motions are checked first at every this-many-th configuration with margins this many
     # times wider, densely only next to one that comes closer: the same guarantee in fewer checks (1: densely throughout)
+
+    def problem(self) -> str:
+        """What is wrong with the values, naming the parameter ('' when nothing): checked before the step runs."""
+        if self.planner not in PLANNERS:
+            return f"planner must be one of {', '.join(PLANNERS)}, got '{self.planner}'"
+        if self.contact_coarse < 1:
+            return f"contact_coarse must be a whole number >= 1, got {self.contact_coarse}"
+        return ""
 
 
 @dataclass(frozen=True)

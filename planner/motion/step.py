@@ -26,8 +26,6 @@ from .result import PHASES, Motion, MotionParams
 from .timing import sample_polyline
 from .validity import Profile, transit_profile
 
-PLANNERS = ("roadmap", "rrt")
-
 
 def contact_profile(p: MotionParams) -> Profile:
     """The paddings of the motions that touch the object (see validity.py)."""
@@ -57,10 +55,9 @@ def collector_paused() -> Iterator[None]:
 def plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps, roadmap: Roadmap, p: MotionParams,
                 rng: np.random.Generator, progress: Progress = no_progress) -> tuple[Motion, list[float]]:
     """(the motion, its stage seconds): the first double grasp, best first, whose whole motion is valid."""
-    if p.planner not in PLANNERS:
-        raise ValueError(f"motion.planner must be one of {', '.join(PLANNERS)}, got '{p.planner}'")
-    if p.contact_coarse < 1:
-        raise ValueError(f"motion.contact_coarse must be a whole number >= 1, got {p.contact_coarse}")
+    problem = p.problem()
+    if problem:
+        raise ValueError(f"motion.{problem}")
     with collector_paused():
         return _plan_motion(scene, pick, place, dg, roadmap, p, rng, progress)
 
