@@ -55,12 +55,14 @@ def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.nd
             geom.computeLocalAABB()
             reach = float(np.linalg.norm(obj.placement.act(np.asarray(geom.aabb_center)))) + float(geom.aabb_radius)
         chain = list(model.supports[obj.parentJoint])[1:]
+        offsets = [model.jointPlacements[k].translation for k in chain]  # read once: each is a copy out of pinocchio
+        lengths = [float(np.linalg.norm(t)) for t in offsets]
         for i, j in enumerate(chain):
             if not model.joints[j].shortname().startswith(("JointModelR", "JointModelRevolute")):
                 raise ValueError(f"joint '{model.names[j]}' is not revolute: the displacement bound assumes revolute joints")
-            offsets = [model.jointPlacements[k].translation for k in chain[i + 1:]]
-            across = offsets[0] - axes[j] * (offsets[0] @ axes[j]) if offsets else np.zeros(3)
-            rest = sum(float(np.linalg.norm(t)) for t in offsets[1:])
+            below = offsets[i + 1] if i + 1 < len(chain) else None
+            across = below - axes[j] * (below @ axes[j]) if below is not None else np.zeros(3)
+            rest = sum(lengths[i + 2:])
             radii[g, model.joints[j].idx_q] = float(np.linalg.norm(across)) + rest + reach
     return radii
 
