@@ -7,7 +7,9 @@ Workers never outlive their parent: each asks the kernel for SIGKILL when the th
 it dies (Linux `PR_SET_PDEATHSIG`, so even `kill -9` of the parent ends them), a pool left by an
 exception (Ctrl-C, SIGTERM turned into `Terminated`) is killed rather than waited for (its workers are
 forked together, those signals held until every one is in the pool's map), and
-`stop_pools(thread)` kills the live pools a thread made (the workbench's background run, when it shuts down).
+`stop_pools(thread)` kills the live pools a thread made (the workbench's background run, when it shuts down)
+and refuses it any new one (`Stopped`): at exit CPython waits for every pool's jobs, so a pool started
+after the kill, between two of a step's pools, kept a stopped workbench alive for minutes.
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ import os
 import signal
 import sys
 import threading
+import weakref
 from collections.abc import Callable, Iterator, Sequence
 from types import FrameType
 from typing import Any
@@ -27,12 +30,17 @@ PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
 _LIVE: dict[concurrent.futures.ProcessPoolExecutor, threading.Thread] = {}  # live pools, by the thread that made them
-_LIVE_LOCK = threading.Lock()
+_STOPPED: weakref.WeakSet[threading.Thread] = weakref.WeakSet()  # threads stop_pools was called for: no new pool
+_LIVE_LOCK = threading.Lock()  # guards _LIVE and _STOPPED
 _SPAWN_LOCK = threading.Lock()  # held while a pool forks its workers
 
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread so that `finally` blocks run (pools killed, temporary files removed)."""
+
+
+class Stopped(RuntimeError):
+    """A thread whose pools `stop_pools` killed asked for a new one."""
 
 
 def _raise_terminated(signum: int, frame: FrameType | None) -> None:
@@ -112,8 +120,10 @@ def _kill(pool: concurrent.futures.ProcessPoolExecutor) -> None:
 
 
 def stop_pools(thread: threading.Thread) -> None:
-    """Kill the workers of the pools `thread` made that are still running (on shutdown, from another thread)."""
+    """Kill the workers of the pools `thread` made that are still running, and refuse it new ones (on shutdown, from
+    another thread)."""
     with _LIVE_LOCK:
+        _STOPPED.add(thread)
         pools = [pool for pool, owner in _LIVE.items() if owner is thread]
     for pool in pools:
         _kill(pool)
@@ -122,10 +132,14 @@ def stop_pools(thread: threading.Thread) -> None:
 @contextlib.contextmanager
 def worker_pool(workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()
                 ) -> Iterator[concurrent.futures.ProcessPoolExecutor]:
-    """A pool of `workers` forked processes that die with their parent; on an exception its workers are killed, not awaited."""
+    """A pool of `workers` forked processes that die with their parent; on an exception its workers are killed, not awaited;
+    `Stopped` in a thread `stop_pools` was called for."""
     pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_child_init,
                                                   initargs=(os.getpid(), initializer, initargs))
     with _LIVE_LOCK:
+        if threading.current_thread() in _STOPPED:
+            pool.shutdown(wait=False)  # no worker was forked yet: they start with the first job
+            raise Stopped(f"thread '{threading.current_thread().name}' was stopped: it starts no more workers")
         _LIVE[pool] = threading.current_thread()
     try:
         with _SPAWN_LOCK, _signals_deferred():

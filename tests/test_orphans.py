@@ -167,3 +167,27 @@ def test_sigterm_while_a_pool_forks_kills_every_worker() -> None:
     workers = forked[-1]
     left = sorted(w for w in workers if Path(f"/proc/{w}").exists())
     assert len(workers) == 2 and left == [], f"workers {left} not reaped by the pool"
+
+
+def test_a_stopped_thread_starts_no_new_pool() -> None:
+    """stop_pools between two of a thread's pools (none live to kill): the thread's next pool is refused, not forked (at
+    exit CPython waits for every pool's jobs: a stopped workbench stayed up for minutes)."""
+    from planner.forked import Stopped, stop_pools, worker_pool
+
+    before, stopped, outcome = _children(os.getpid()), threading.Event(), []
+
+    def body() -> None:
+        stopped.wait(60)
+        try:
+            with worker_pool(2) as pool:
+                outcome.append(list(pool.map(abs, [-1, -2])))
+        except Stopped:
+            outcome.append("stopped")
+
+    thread = threading.Thread(target=body)
+    thread.start()
+    stop_pools(thread)
+    stopped.set()
+    thread.join(60)
+    assert outcome == ["stopped"]
+    assert _children(os.getpid()) - before == set()
