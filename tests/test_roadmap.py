@@ -20,7 +20,7 @@ from planner.roadmap import build as roadmap_build
 from planner.roadmap.build import build_roadmap, roadmap_collision_model, segment_checker
 from planner.roadmap.local_planner import SegmentChecker, coarse_first, van_der_corput
 from planner.roadmap.step import session_roadmap_seed
-from planner.roadmap.super_graph import components
+from planner.roadmap.super_graph import components, edge_candidates, node_candidates
 
 SMALL = RoadmapParams(nodes=7, max_failures=100)
 SESSION_SEED = 3  # the seed of the session tests' plans (test_session.py)
@@ -94,6 +94,28 @@ def test_super_graph_structure(small):
             assert small.node_common[u] != small.node_common[v]
     assert np.array_equal(small.node_component, components(len(small.node_q), small.edges))
     assert small.wrists.shape == (len(small.node_q), len(arms), 3)
+
+
+def test_one_arm_edges_move_the_arm_whose_common_part_the_nodes_take():
+    """Three nodes on arm 0's path, two on arm 1's: every (arm-0 edge, arm-1 node) and (arm-1 edge, arm-0 node) pair is
+    an edge with that arm moving and its common part source, checked for the still arm against the rest."""
+    node_elem, source = node_candidates(3, 2)
+    e0, e1 = np.array([[0, 1], [1, 2]]), np.array([[0, 1]])
+    arms = ("right", "left")
+    both, _ = edge_candidates(node_elem, source, e0, e1, arms, mixed=False)
+    cand, subsets = edge_candidates(node_elem, source, e0, e1, arms, mixed=False, one_arm=True)
+    found = {(tuple(node_elem[u]), tuple(node_elem[v]), int(source[u]), int(source[v]), s)
+             for (u, v), s in zip(cand, subsets) if (node_elem[u] == node_elem[v]).sum() == 1}  # one arm still
+    expected = {((a, still), (b, still), 0, 0, "cross/left") for a, b in e0 for still in (0, 1)}
+    expected |= {((still, a), (still, b), 1, 1, "cross/right") for a, b in e1 for still in (0, 1, 2)}
+    assert found == expected
+    assert len(cand) == len(both) + len(expected)
+
+
+def test_super_graph_moves_one_arm_at_a_time_too(small):
+    """The default roadmap has edges where one arm holds still, each along an elementary edge of the other."""
+    still = (small.node_elem[small.edges[:, 0]] == small.node_elem[small.edges[:, 1]]).sum(axis=1) == 1
+    assert still.any() and (~still).any()
 
 
 @pytest.mark.parametrize("coarse", [1, 3, 5])

@@ -121,7 +121,8 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
         checks["sg_nodes"] = n_checks
 
         t = time.perf_counter()
-        cand, subsets = sg.edge_candidates(node_elem, node_common, e0.edges, e1.edges, arms, params.mixed_edges)
+        cand, subsets = sg.edge_candidates(node_elem, node_common, e0.edges, e1.edges, arms, params.mixed_edges,
+                                         params.one_arm_edges)
         if params.tree:
             seg = segment_checker(cm, params)
             uf = sg.UnionFind(len(node_q))

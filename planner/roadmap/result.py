@@ -19,6 +19,7 @@ class RoadmapParams:
     env_clearance: float = 0.01  # m: ... and keep this distance along every motion (the project's margin)
     self_padding: float = 0.015  # m: robot-robot pairs are checked colliding closer than this, and keep >= 0
     mixed_edges: bool = False  # also SG edges whose common part switches source along two elementary edges
+    one_arm_edges: bool = True  # also SG edges moving one arm along its elementary edge, the other still
     tree: bool = False  # the tree variant: SG edges only between different connected components
 
 

@@ -32,12 +32,13 @@ def node_subsets(source: np.ndarray, arms: tuple[str, str]) -> list[str]:
 
 
 def edge_candidates(node_elem: np.ndarray, node_source: np.ndarray, edges0: np.ndarray, edges1: np.ndarray,
-                    arms: tuple[str, str], mixed: bool) -> tuple[np.ndarray, list[str]]:
+                    arms: tuple[str, str], mixed: bool, one_arm: bool = False) -> tuple[np.ndarray, list[str]]:
     """(c, 2) SG node pairs to test, in a deterministic order, and the pair subset checking each.
 
     Edges along an elementary edge in both roadmaps with the same common-part source; with `mixed`,
-    also those whose source switches; and 'switch' edges between the two nodes of one elementary
-    pair (only the common part moves, from one source to the other).
+    also those whose source switches; with `one_arm`, those along an elementary edge of the arm whose
+    common part the nodes take, the other arm still; and 'switch' edges between the two nodes of one
+    elementary pair (only the common part moves, from one source to the other).
     """
     index = {(int(a), int(b), int(s)): k for k, (a, b, s) in enumerate(zip(node_elem[:, 0], node_elem[:, 1], node_source))}
     out, subsets = [], []
@@ -49,6 +50,15 @@ def edge_candidates(node_elem: np.ndarray, node_source: np.ndarray, edges0: np.n
                     if u is not None and v is not None:
                         out.append((u, v))
                         subsets.append(f"cross/{arms[1 - s]}" if s == t else "mixed")
+    if one_arm:
+        for s, elementary in ((0, edges0), (1, edges1)):
+            for a, b in elementary:
+                for still in range(int(node_elem[:, 1 - s].max(initial=-1)) + 1):
+                    ends = [(a, still, s), (b, still, s)] if s == 0 else [(still, a, s), (still, b, s)]
+                    u, v = index.get(ends[0]), index.get(ends[1])
+                    if u is not None and v is not None:
+                        out.append((u, v))
+                        subsets.append(f"cross/{arms[1 - s]}")
     for (x0, x1, s), u in index.items():
         v = index.get((x0, x1, 1))
         if s == 0 and v is not None:
