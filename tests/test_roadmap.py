@@ -113,7 +113,7 @@ def test_one_arm_edges_move_the_arm_whose_common_part_the_nodes_take():
 
 
 def test_super_graph_moves_one_arm_at_a_time_too(small):
-    """The default roadmap has edges where one arm holds still, each along an elementary edge of the other."""
+    """A roadmap built with the default edge kinds has edges where one arm holds still besides those moving both."""
     still = (small.node_elem[small.edges[:, 0]] == small.node_elem[small.edges[:, 1]]).sum(axis=1) == 1
     assert still.any() and (~still).any()
 

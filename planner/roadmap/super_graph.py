@@ -52,10 +52,12 @@ def edge_candidates(node_elem: np.ndarray, node_source: np.ndarray, edges0: np.n
                         subsets.append(f"cross/{arms[1 - s]}" if s == t else "mixed")
     if one_arm:
         for s, elementary in ((0, edges0), (1, edges1)):
+            def key(moving: int, still: int, s: int = s) -> tuple[int, int, int]:
+                return (moving, still, s) if s == 0 else (still, moving, s)
+
             for a, b in elementary:
-                for still in range(int(node_elem[:, 1 - s].max(initial=-1)) + 1):
-                    ends = [(a, still, s), (b, still, s)] if s == 0 else [(still, a, s), (still, b, s)]
-                    u, v = index.get(ends[0]), index.get(ends[1])
+                for still in np.unique(node_elem[:, 1 - s]).tolist():
+                    u, v = index.get(key(a, still)), index.get(key(b, still))
                     if u is not None and v is not None:
                         out.append((u, v))
                         subsets.append(f"cross/{arms[1 - s]}")
