@@ -99,10 +99,11 @@ class RoadmapLayer(StepLayer):
         self.roadmap, self._planner, self.last_query = result, None, None
         stats = result.stats()
         if len(result.edges):
-            points = result.wrists[result.edges].transpose(0, 2, 1, 3)  # (edges, wrists, 2 ends, 3)
-            colors = np.repeat(faint(edge_colors(result))[:, :, None], 2, axis=2)
-            self.server.scene.add_line_segments(f"{self.name}/edges", points.reshape(-1, 2, 3).astype(np.float32),
-                                                colors.reshape(-1, 2, 3), thickness=LINE_THICKNESS)
+            points = result.wrists[result.edges].transpose(0, 2, 1, 3).reshape(-1, 2, 3)  # (edges * wrists, 2 ends, 3)
+            colors = np.repeat(faint(edge_colors(result))[:, :, None], 2, axis=2).reshape(-1, 2, 3)
+            moved = np.any(points[:, 0] != points[:, 1], axis=1)  # a wrist that holds still (one-arm edge) draws nothing
+            self.server.scene.add_line_segments(f"{self.name}/edges", points[moved].astype(np.float32), colors[moved],
+                                                thickness=LINE_THICKNESS)
         self._build_gui(stats)
         largest = int(np.argmax(np.bincount(result.node_component))) if len(result.node_q) else 0
         self.poses = {}
