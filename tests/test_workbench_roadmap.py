@@ -11,8 +11,10 @@ from playwright.sync_api import Page
 from test_workbench_browser import CHANGED, EXAMPLE, _changed, _free_port, _settled, _until_changed, _view, _wait_for
 
 from planner.roadmap.build import wrist_positions
+from planner.roadmap.result import Roadmap
+from planner.session import Session
 from workbench.app import Workbench
-from workbench.layers.roadmap import JOINT_STEP, RoadmapLayer
+from workbench.layers.roadmap import JOINT_STEP, RoadmapLayer, edge_colors, wrist_segments
 
 pytestmark = pytest.mark.browser
 
@@ -58,6 +60,33 @@ def _super_graph_hidden(page: Page, layer: RoadmapLayer) -> Iterator[float]:
         yield _until_changed(page, shown)
     finally:
         layer.visible = True
+
+
+def test_each_wrist_move_is_drawn_once_in_its_most_prominent_colour() -> None:
+    """The example's segments are exactly the distinct moves of a wrist along an edge (either direction, zero-length
+    ones left out), each once, coloured as the valid edge of the largest component that makes it (a plain loop)."""
+    roadmap = Session.open(EXAMPLE).result("roadmap")
+    assert isinstance(roadmap, Roadmap)
+    colors = edge_colors(roadmap)
+    sizes = {c: int(n) for c, n in enumerate(np.bincount(roadmap.node_component))}
+    best: dict[frozenset, tuple] = {}
+    for e, (i, j) in enumerate(roadmap.edges.tolist()):
+        for w in range(roadmap.wrists.shape[1]):
+            a, b = tuple(roadmap.wrists[i, w]), tuple(roadmap.wrists[j, w])
+            if a == b:
+                continue
+            size = sizes[int(roadmap.node_component[i])]
+            key = (not roadmap.edge_valid[e], -size, sum(sizes[c] == size for c in range(int(roadmap.node_component[i]))))
+            old = best.get(frozenset((a, b)))
+            if old is None or key < old[0]:
+                best[frozenset((a, b))] = (key, tuple(colors[e, w]))
+    points, drawn = wrist_segments(roadmap)
+    segments = [frozenset((tuple(p[0]), tuple(p[1]))) for p in points]
+    assert len(set(segments)) == len(segments), "a move is drawn twice"
+    assert set(segments) == set(best)
+    assert len(segments) < 0.7 * len(roadmap.edges) * roadmap.wrists.shape[1]
+    for seg, color in zip(segments, drawn):
+        assert tuple(color) == best[seg][1]
 
 
 def test_super_graph_is_drawn(workbench: Workbench, page: Page, layer: RoadmapLayer) -> None:

@@ -1,8 +1,8 @@
 """The `roadmap` step drawn: the Super Graph in wrist space, node picking and a query tool that animates its path.
 
 Each Super Graph edge is drawn once per wrist, from the wrist's position at one node to its position
-at the other (all segments in one `add_line_segments` call: viser is slow to show thousands of
-separate nodes). A wrist has its arm's colour; the largest components get shades of it, the small
+at the other, a move that several edges share once (all segments in one `add_line_segments` call:
+viser is slow to show thousands of separate nodes). A wrist has its arm's colour; the largest components get shades of it, the small
 ones are grey, invalid edges dark. The "Roadmap" GUI folder picks a node (the robot goes there) and
 plans from the workbench's current configuration to it, in a background thread, then animates.
 """
@@ -50,13 +50,18 @@ def faint(colors: np.ndarray) -> np.ndarray:
     return np.round(colors + FAINT * (BACKGROUND - colors.astype(float))).astype(np.uint8)
 
 
-def edge_colors(roadmap: Roadmap) -> np.ndarray:
-    """(edges, wrists, 3) uint8: each wrist's colour shaded by its edge's component rank; grey for small ones, dark if invalid."""
+def edge_component_rank(roadmap: Roadmap) -> np.ndarray:
+    """(edges,) the size rank of each edge's component: 0 for the largest."""
     comp = roadmap.node_component
     sizes = np.bincount(comp)
     rank = np.empty_like(sizes)
     rank[np.argsort(-sizes, kind="stable")] = np.arange(len(sizes))
-    edge_rank = rank[comp[roadmap.edges[:, 0]]] if len(roadmap.edges) else np.zeros(0, dtype=int)
+    return rank[comp[roadmap.edges[:, 0]]] if len(roadmap.edges) else np.zeros(0, dtype=int)
+
+
+def edge_colors(roadmap: Roadmap) -> np.ndarray:
+    """(edges, wrists, 3) uint8: each wrist's colour shaded by its edge's component rank; grey for small ones, dark if invalid."""
+    edge_rank = edge_component_rank(roadmap)
     wrists = roadmap.wrists.shape[1]
     out = np.empty((len(roadmap.edges), wrists, 3), dtype=np.uint8)
     for w in range(wrists):
@@ -64,6 +69,29 @@ def edge_colors(roadmap: Roadmap) -> np.ndarray:
         out[:, w] = palette[np.minimum(edge_rank, len(SHADES))]
     out[~roadmap.edge_valid] = INVALID_COLOR
     return out
+
+
+def wrist_segments(roadmap: Roadmap) -> tuple[np.ndarray, np.ndarray]:
+    """((k, 2, 3) segments, (k, 3) uint8 colours): each wrist's moves along the Super Graph's edges, each drawn once.
+
+    A wrist that holds still (one-arm edge) draws nothing, and a move that several edges share (the same elementary
+    edge with the other arm anywhere: 42% of the default roadmap's) is drawn once, in the colour of its most
+    prominent edge (valid before invalid, then the largest component): software WebGL draws every line it is sent.
+    """
+    wrists = roadmap.wrists.shape[1]
+    points = roadmap.wrists[roadmap.edges].transpose(0, 2, 1, 3).reshape(-1, 2, 3)  # (edges * wrists, 2 ends, 3)
+    colors = edge_colors(roadmap).reshape(-1, 3)
+    rank = edge_component_rank(roadmap)
+    priority = np.repeat(rank + np.where(roadmap.edge_valid, 0, len(rank) + 1), wrists)
+    a, b = points[:, 0], points[:, 1]
+    moved = np.flatnonzero(np.any(a != b, axis=1))
+    first = np.argmax(a[moved] != b[moved], axis=1)  # the first coordinate where the ends differ orders them
+    swap = a[moved, first] > b[moved, first]
+    keys = np.where(swap[:, None, None], points[moved][:, ::-1], points[moved]).reshape(len(moved), 6)
+    order = np.argsort(priority[moved], kind="stable")
+    _, firsts = np.unique(keys[order], axis=0, return_index=True)
+    kept = moved[np.sort(order[firsts])]
+    return points[kept], colors[kept]
 
 
 def frames(robot, path: np.ndarray) -> np.ndarray:
@@ -99,11 +127,9 @@ class RoadmapLayer(StepLayer):
         self.roadmap, self._planner, self.last_query = result, None, None
         stats = result.stats()
         if len(result.edges):
-            points = result.wrists[result.edges].transpose(0, 2, 1, 3).reshape(-1, 2, 3)  # (edges * wrists, 2 ends, 3)
-            colors = np.repeat(faint(edge_colors(result))[:, :, None], 2, axis=2).reshape(-1, 2, 3)
-            moved = np.any(points[:, 0] != points[:, 1], axis=1)  # a wrist that holds still (one-arm edge) draws nothing
-            self.server.scene.add_line_segments(f"{self.name}/edges", points[moved].astype(np.float32), colors[moved],
-                                                thickness=LINE_THICKNESS)
+            points, colors = wrist_segments(result)
+            self.server.scene.add_line_segments(f"{self.name}/edges", points.astype(np.float32),
+                                                np.repeat(faint(colors)[:, None], 2, axis=1), thickness=LINE_THICKNESS)
         self._build_gui(stats)
         largest = int(np.argmax(np.bincount(result.node_component))) if len(result.node_q) else 0
         self.poses = {}
