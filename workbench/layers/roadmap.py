@@ -1,10 +1,11 @@
 """The `roadmap` step drawn: the Super Graph in wrist space, node picking and a query tool that animates its path.
 
-Each Super Graph edge is drawn once per wrist, from the wrist's position at one node to its position
-at the other, a move that several edges share once (all segments in one `add_line_segments` call:
-viser is slow to show thousands of separate nodes). A wrist has its arm's colour; the largest components get shades of it, the small
-ones are grey, invalid edges dark. The "Roadmap" GUI folder picks a node (the robot goes there) and
-plans from the workbench's current configuration to it, in a background thread, then animates.
+Each wrist's moves along the Super Graph's edges are drawn, from its position at one node to its
+position at the other, a move that several edges share once (all segments in one `add_line_segments`
+call: viser is slow to show thousands of separate nodes). A wrist has its arm's colour; the largest
+components get shades of it, the small ones are grey, invalid edges dark. The "Roadmap" GUI folder
+picks a node (the robot goes there) and plans from the workbench's current configuration to it, in a
+background thread, then animates.
 """
 from __future__ import annotations
 
@@ -75,7 +76,7 @@ def wrist_segments(roadmap: Roadmap) -> tuple[np.ndarray, np.ndarray]:
     """((k, 2, 3) segments, (k, 3) uint8 colours): each wrist's moves along the Super Graph's edges, each drawn once.
 
     A wrist that holds still (one-arm edge) draws nothing, and a move that several edges share (the same elementary
-    edge with the other arm anywhere: 42% of the default roadmap's) is drawn once, in the colour of its most
+    edge with the other arm anywhere: 42% of the example session's) is drawn once, in the colour of its most
     prominent edge (valid before invalid, then the largest component): software WebGL draws every line it is sent.
     """
     wrists = roadmap.wrists.shape[1]
