@@ -493,3 +493,37 @@ def test_transit_checks_count_every_collision_check_of_the_transit(example, monk
     monkeypatch.setattr(CollisionChecker, "in_collision", lambda self, *a, **k: calls.append(1) or check(self, *a, **k))
     planner.transit(3, start, goal, Situation(None, scene.object_final))
     assert planner.stats[3].checks == len(calls) > 2, (planner.stats[3].checks, len(calls))
+
+
+def test_the_carry_transit_can_use_the_roadmap_nodes(example):
+    """While a hand holds the object, its closed fingers stay near its own wrist (nearer than the transit padding): the
+    validity of the whole Carry transit pads those pairs as its two ends allow, so roadmap nodes near its start are
+    valid there (with those pairs at the transit padding, none was, and the graph went unused). The example's Carry
+    transit: the samples of phase Carry where no hand works at the object, the picking arm holding it."""
+    from planner.collision import build_collision_model
+    from planner.motion.graph import MotionGraph
+    from planner.motion.phases import PhasePlanner
+    from planner.motion.result import PHASES
+    from planner.motion.situation import Situation
+    from planner.motion.space import JointSpace
+    from planner.motion.step import contact_profile
+    from planner.motion.validity import transit_profile
+    from planner.session import Session
+
+    scene, roadmap, _ = example
+    robot, p = scene.robot, MotionParams()
+    motion = Session.open(EXAMPLE).result("motion")
+    carry = np.flatnonzero((motion.phase == PHASES.index("Carry")) & (motion.active == -1) & (motion.holder >= 0))
+    run = carry[: np.argmax(np.diff(carry) > 1) + 1] if np.any(np.diff(carry) > 1) else carry
+    q_start, q_goal = motion.q[run[0]], motion.q[run[-1]]
+    arm = motion.arms[int(motion.holder[run[0]])]
+    planner = PhasePlanner(scene, build_collision_model(robot, scene.environment), MotionGraph(roadmap),
+                           transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
+                           np.random.default_rng(0), False)
+    hold = np.linalg.inv(motion.object_pose[run[0]]) @ planner.palm(q_start, arm)
+    model = planner.model(Situation(arm, hold), q_start, planner.transit_idx)
+    full, _ = planner.transit_validities(model, q_start, q_goal)
+    space = JointSpace.of(robot.lower, robot.upper, planner.transit_idx, q_start)
+    nearest = np.argsort(space.distance(roadmap.node_q, q_start), kind="stable")[:48]
+    valid = sum(full.on("changed").state_valid(space.full(space.reduce(roadmap.node_q[n]))) for n in nearest)
+    assert valid >= 12, f"only {valid} of the 48 roadmap nodes nearest the Carry start are valid while it holds the object"

@@ -442,12 +442,7 @@ class PhasePlanner:
         if not space.holds(q_goal):
             raise ValueError("transit ends must agree on every joint outside the ones it moves")
         part = "transit" if arm is None else "arm away"
-        model = self.model(situation, q_start, idx)
-        start, goal = (self.clearances(model, q) for q in (q_start, q_goal))
-        closest = {pair: min(start.get(pair, np.inf), goal.get(pair, np.inf)) for pair in start.keys() | goal.keys()}
-        full = self.validity(model, self.transit_profile)
-        near = self.validity(model, self.transit_profile, self.meter(model).fitted_pairs(self.transit_profile, closest))
-        # near: what touches the ends, the pairs they hold close checked as densely as those need
+        full, near = self.transit_validities(self.model(situation, q_start, idx), q_start, q_goal)
         stats = self.stats[phase]
         checkers = {id(v.seg): v.seg for v in (full, near)}.values()  # one when no pair is fitted
         before = sum(c.checks for c in checkers)
@@ -455,6 +450,18 @@ class PhasePlanner:
             return self._transit(phase, part, q_start, q_goal, situation, space, full, near, arm)
         finally:
             stats.checks += sum(c.checks for c in checkers) - before
+
+    def transit_validities(self, model: CollisionModel, q_start: np.ndarray, q_goal: np.ndarray) -> tuple[Validity, Validity]:
+        """(full, near) of a transit between two configurations of a situation's model. `full`, for the whole transit,
+        pads the pairs both ends hold close (a hand closed on the object holds its thumb near its own wrist) as the
+        farther end allows: at the transit padding no configuration of the phase, no roadmap node, would be valid.
+        `near`, for what touches an end, pads every pair either end holds close as the nearer end allows."""
+        start, goal = (self.clearances(model, q) for q in (q_start, q_goal))
+        closest = {pair: min(start.get(pair, np.inf), goal.get(pair, np.inf)) for pair in start.keys() | goal.keys()}
+        held = {pair: max(start[pair], goal[pair]) for pair in start.keys() & goal.keys()}
+        meter = self.meter(model)
+        return (self.validity(model, self.transit_profile, meter.fitted_pairs(self.transit_profile, held)),
+                self.validity(model, self.transit_profile, meter.fitted_pairs(self.transit_profile, closest)))
 
     def _transit(self, phase: int, part: str, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, space: JointSpace,
                  full: Validity, near: Validity, arm: str | None) -> Piece:
