@@ -8,8 +8,9 @@ offline roadmap did not check ('changed': the object, a hand holding it), edges 
 offline (connections, earlier reconnections) over every pair. Invalid elements are marked and the
 search runs again. When the searches are used up, the valid nodes bounding the invalid span of the
 last path are reconnected with OMPL's RRTConnect; when the graph cannot join the ends at all, the
-end whose component is smaller is reconnected to the nearest valid nodes of the other (the goal
-tree grows from each). What RRTConnect finds is added to the graph, as the paper enriches its PRM
+end whose component is smaller is reconnected to the other end and the nearest valid nodes of its
+component (the goal tree grows from each: where the ends are nearer each other than the graph, it
+joins them directly). What RRTConnect finds is added to the graph, as the paper enriches its PRM
 with RRT trees. The single-query baseline (`rrt_transit`) runs RRTConnect alone between the ends.
 """
 from __future__ import annotations
@@ -153,8 +154,8 @@ class LazyTransit:
 
     def _reconnection(self, last: tuple[list[int], tuple[int, int]] | None, start: int, goal: int) -> tuple[int, list[int]]:
         """The valid node a reconnection starts from and the valid nodes it may end at: across the invalid span of the
-        last path; else (the ends' components apart) from the end whose component is smaller to the valid nodes of the
-        other component nearest it, so the tree joins the graph wherever it reaches it first."""
+        last path; else (the ends' components apart) from the end whose component is smaller to the other end and the
+        valid nodes of its component nearest it, so the tree joins the other end or the graph wherever it reaches first."""
         if last is not None:
             path, (first, final) = last
             return path[first], [path[final + 1]]
@@ -162,13 +163,14 @@ class LazyTransit:
         size = np.bincount(comp)
         root, other = (start, goal) if size[comp[start]] <= size[comp[goal]] else (goal, start)
         ids = np.flatnonzero((comp == comp[other]) & (self.status.node != INVALID))
+        ids = ids[ids != other]
         goals: list[int] = []
         for n in ids[np.argsort(self.space.distance(self.graph.q[ids], self.graph.q[root]), kind="stable")][: 3 * self.p.goal_nodes]:
             if len(goals) == self.p.goal_nodes:
                 break
             if self._node_valid(int(n)):
                 goals.append(int(n))
-        return root, goals or [other]
+        return root, [other] + goals
 
     def query(self, q_start: np.ndarray, q_goal: np.ndarray) -> np.ndarray:
         """A valid polyline (full configurations) from q_start to q_goal; both ends must be valid states."""
