@@ -239,40 +239,82 @@ def carried(example):
     pytest.fail("no goal and hold whose object-free path sweeps the carried object through something")
 
 
-def _carry(example, case, first: bool = False) -> tuple[list[str], object]:
-    """The lazy transit of the carried case; (what the independent check finds along it, at ten times the resolution of the
-    object's pairs (with `first`, up to the first configuration where it finds something), the transit's stats)."""
-    from planner.motion.graph import MotionGraph
+def _carried_validity(case):
+    """The planner's validity of the carried case (its model as `situation.situation_model` makes it at the call)."""
     from planner.motion.situation import Situation, situation_model
-    from planner.motion.transit import LazyTransit, TransitStats
     from planner.motion.validity import make_validity
+
+    c = case
+    return make_validity(situation_model(c["cm"], c["shape"], Situation(c["arm"], c["hold"]), (), c["idx"]), c["profile"], "moving")
+
+
+def _independent_hits(case, validity, path: np.ndarray, first: bool = False) -> list[str]:
+    """What the independent check finds along a path of the carried case, at ten times the resolution of the object's
+    pairs (with `first`, up to the first configuration where it finds something)."""
+    c = case
+    found = (c["oracle"].collisions(a + s * (b - a), c["at"](a + s * (b - a)), c["arm"], None, False)
+             for a, b in zip(path[:-1], path[1:]) for s in np.linspace(0, 1, 10 * validity.samples(a, b, "object")))
+    return next((h for h in found if h), []) if first else [hit for h in found for hit in h]
+
+
+def _carry(example, case) -> tuple[object, object, np.ndarray]:
+    """The lazy transit of the carried case: (the validity it was planned with, the transit's stats, its path)."""
+    from planner.motion.graph import MotionGraph
+    from planner.motion.transit import LazyTransit, TransitStats
 
     _, roadmap, _ = example
     c = case
-    validity = make_validity(situation_model(c["cm"], c["shape"], Situation(c["arm"], c["hold"]), (), c["idx"]), c["profile"], "moving")
+    validity = _carried_validity(c)
     stats = TransitStats()
     path = LazyTransit(MotionGraph(roadmap), c["space"], validity.on("changed"), validity, validity, TRANSIT,
                        np.random.default_rng(0), stats).query(c["q_start"], c["q_goal"])
     assert np.allclose(path[0], c["q_start"]) and np.allclose(path[-1], c["q_goal"])
-    found = (c["oracle"].collisions(a + s * (b - a), c["at"](a + s * (b - a)), c["arm"], None, False)
-             for a, b in zip(path[:-1], path[1:]) for s in np.linspace(0, 1, 10 * validity.samples(a, b, "object")))
-    hits = next((h for h in found if h), []) if first else [hit for h in found for hit in h]
-    return hits, stats
+    return validity, stats, path
 
 
 @pytest.mark.slow
 def test_lazy_transit_goes_around_with_the_carried_object(example, carried):
     """The carried object cuts the path the graph gives the robot alone: the lazy search invalidates what it hits and goes
     around, and the independent check (URDF meshes and the carried object with python-fcl) finds the new path free."""
-    hits, stats = _carry(example, carried)
+    validity, stats, path = _carry(example, carried)
+    hits = _independent_hits(carried, validity, path)
     assert stats.edges_invalidated + stats.rrt_calls > 0, "the carried object must have cut the robot-alone path"
     assert hits == []
 
 
+def _probe_beside_the_robot(scene, case, path: np.ndarray):
+    """(the environment with a 1 cm ball 'probe' on the carried object's surface at a configuration of the path, its
+    collision model, the case's validity in it) such that the validity passes the path: the robot itself never comes
+    near the ball. Tried from the path's middle outwards, the object's points farthest from the palm first; None when
+    none is found."""
+    import pinocchio as pin
+
+    from planner.collision import build_collision_model
+    from planner.environment import Obstacle
+
+    dense = np.concatenate([np.linspace(a, b, 8, endpoint=False) for a, b in zip(path[:-1], path[1:])])
+    order = np.argsort(np.abs(np.arange(len(dense)) - len(dense) / 2), kind="stable")
+    for q in dense[order[::4]][:8]:
+        pose = case["at"](q)
+        vertices = np.asarray(scene.object_mesh.vertices) @ pose[:3, :3].T + pose[:3, 3]
+        palm = pin.SE3(pose @ case["hold"]).translation
+        for v in np.argsort(-np.linalg.norm(vertices - palm, axis=1))[:40:10]:
+            probe = np.eye(4)
+            probe[:3, 3] = vertices[v]
+            environment = scene.environment + (Obstacle("probe", "sphere", (0.01,), probe),)
+            cm = build_collision_model(scene.robot, environment)
+            validity = _carried_validity(dict(case, cm=cm))
+            if validity.path_valid(path):
+                return environment, cm, validity
+    return None
+
+
 @pytest.mark.slow
 def test_the_independent_check_catches_a_checker_blind_to_the_carried_object(example, carried, monkeypatch):
-    """The same transit with the planner's model broken on purpose (the carried object no longer checked against the
-    obstacles): the independent check must find the collisions the planner then lets through."""
+    """The planner's model broken on purpose (the carried object no longer checked against the obstacles) plans the
+    carried transit; a small ball is then put as an obstacle on the object's surface half way along that path. The
+    broken checker still passes the path (a planner using it lets the object through the ball), the planner's own
+    checker does not, and the independent check must find the object in the ball."""
     import dataclasses
 
     import planner.motion.situation as situation
@@ -286,8 +328,16 @@ def test_the_independent_check_catches_a_checker_blind_to_the_carried_object(exa
         return dataclasses.replace(model, subsets={**model.subsets, "moving": np.setdiff1d(model.subsets["moving"], object_env)})
 
     monkeypatch.setattr(situation, "situation_model", blind)
-    hits, _ = _carry(example, carried, first=True)
-    assert any("the object with" in h for h in hits), "a checker blind to the carried object's obstacles went unnoticed"
+    scene = example[0]
+    _, _, path = _carry(example, carried)
+    found = _probe_beside_the_robot(scene, carried, path)
+    assert found is not None, "no point of the object's surface along the path that the robot itself keeps clear of"
+    environment, cm, broken = found
+    probed = dict(carried, cm=cm, oracle=Oracle(dataclasses.replace(scene, environment=environment)))
+    monkeypatch.setattr(situation, "situation_model", original)
+    assert not _carried_validity(probed).path_valid(path), "the planner's own checker must see the object hit the ball"
+    hits = _independent_hits(probed, broken, path, first=True)
+    assert "the object with probe" in hits, f"a checker blind to the carried object's obstacles went unnoticed ({hits})"
 
 
 def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
