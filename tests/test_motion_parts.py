@@ -314,7 +314,8 @@ def test_the_independent_check_catches_a_checker_blind_to_the_carried_object(exa
     """The planner's model broken on purpose (the carried object no longer checked against the obstacles) plans the
     carried transit; a small ball is then put as an obstacle on the object's surface half way along that path. The
     broken checker still passes the path (a planner using it lets the object through the ball), the planner's own
-    checker does not, and the independent check must find the object in the ball."""
+    checker does not, and the independent check must find the object in an obstacle (the ball, or one the path already
+    carried it through)."""
     import dataclasses
 
     import planner.motion.situation as situation
@@ -337,7 +338,7 @@ def test_the_independent_check_catches_a_checker_blind_to_the_carried_object(exa
     monkeypatch.setattr(situation, "situation_model", original)
     assert not _carried_validity(probed).path_valid(path), "the planner's own checker must see the object hit the ball"
     hits = _independent_hits(probed, broken, path, first=True)
-    assert "the object with probe" in hits, f"a checker blind to the carried object's obstacles went unnoticed ({hits})"
+    assert any(h.startswith("the object with") for h in hits), f"a checker blind to the carried object's obstacles went unnoticed ({hits})"
 
 
 def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
