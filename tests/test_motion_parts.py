@@ -91,6 +91,20 @@ def test_shortcuts_start_and_end_at_valid_states():
         assert all(rule.motion_valid(a, b, ends=False) for a, b in zip(out[:-1], out[1:]))
 
 
+def _phase_planner(scene, roadmap, baseline: bool = False):
+    """The phase planner of a scene on the roadmap, with the default parameters and seed 0."""
+    from planner.collision import build_collision_model
+    from planner.motion.graph import MotionGraph
+    from planner.motion.phases import PhasePlanner
+    from planner.motion.step import contact_profile
+    from planner.motion.validity import transit_profile
+
+    p = MotionParams()
+    return PhasePlanner(scene, build_collision_model(scene.robot, scene.environment), MotionGraph(roadmap),
+                        transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
+                        np.random.default_rng(0), baseline)
+
+
 @pytest.fixture(scope="module")
 def example(tmp_path_factory):
     from planner.session import Session
@@ -287,8 +301,6 @@ def _probe_beside_the_robot(scene, case, path: np.ndarray):
     collision model, the case's validity in it) such that the validity passes the path: the robot itself never comes
     near the ball. Tried from the path's middle outwards, the object's points farthest from the palm first; None when
     none is found."""
-    import pinocchio as pin
-
     from planner.collision import build_collision_model
     from planner.environment import Obstacle
 
@@ -297,7 +309,7 @@ def _probe_beside_the_robot(scene, case, path: np.ndarray):
     for q in dense[order[::4]][:8]:
         pose = case["at"](q)
         vertices = np.asarray(scene.object_mesh.vertices) @ pose[:3, :3].T + pose[:3, 3]
-        palm = pin.SE3(pose @ case["hold"]).translation
+        palm = (pose @ case["hold"])[:3, 3]
         for v in np.argsort(-np.linalg.norm(vertices - palm, axis=1))[:40:10]:
             probe = np.eye(4)
             probe[:3, 3] = vertices[v]
@@ -349,13 +361,9 @@ def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
 
     import pinocchio as pin
 
-    from planner.collision import build_collision_model
     from planner.environment import Obstacle
-    from planner.motion.graph import MotionGraph
-    from planner.motion.phases import PhasePlanner
     from planner.motion.situation import Situation, fingertip_geometries
-    from planner.motion.step import contact_profile, hand_grasp
-    from planner.motion.validity import transit_profile
+    from planner.motion.step import hand_grasp
     from planner.session import Session
 
     scene, roadmap, _ = example
@@ -372,19 +380,14 @@ def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
         frame = robot.spec.arm(b.arm).hand.prefixed(next(f.tip_frame for f in robot.spec.arm(b.arm).hand.fingers if f.name == finger))
         return data.oMf[robot.frame_id(frame)].translation.copy()
 
-    def planner_for(s):
-        return PhasePlanner(s, build_collision_model(robot, s.environment), MotionGraph(roadmap),
-                            transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
-                            np.random.default_rng(0), False)
-
     q = dg.q_place[0]
-    opened = planner_for(scene).opened(b, p.release, True)
+    opened = _phase_planner(scene, roadmap).opened(b, p.release, True)
     reached = q.copy()
     reached[robot.hand_idx[b.arm]] = opened
     block = np.eye(4)
     block[:3, 3] = tip(reached)
     blocked = dataclasses.replace(scene, environment=scene.environment + (Obstacle("block", "box", (0.015, 0.015, 0.015), block),))
-    planner = planner_for(blocked)
+    planner = _phase_planner(blocked, roadmap)
     situation = Situation(None, scene.object_final, fingertip_geometries(planner.cm, b.arm, b.touching))
     values = planner.letting_go(b, q, situation)
     hand = robot.hand_idx[b.arm]
@@ -403,17 +406,9 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     """The ways a hand's fingers close: all joints at once first; among the others, one moving every finger's joints one
     depth at a time from the tip to the base and one from the base to the tip (a finger curling onto a rounded surface
     hooks its tip first); every way starts at q and ends at the target, and no two are the same."""
-    from planner.collision import build_collision_model
-    from planner.motion.graph import MotionGraph
-    from planner.motion.phases import PhasePlanner
-    from planner.motion.step import contact_profile
-    from planner.motion.validity import transit_profile
-
     scene, roadmap, _ = example
-    robot, p = scene.robot, MotionParams()
-    planner = PhasePlanner(scene, build_collision_model(robot, scene.environment), MotionGraph(roadmap),
-                           transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
-                           np.random.default_rng(0), False)
+    robot = scene.robot
+    planner = _phase_planner(scene, roadmap)
     arm = robot.spec.arm_names[0]
     hand, fingers = robot.hand_idx[arm], list(robot.finger_idx[arm].values())
     q = robot.q_rest.copy()
@@ -520,25 +515,19 @@ def test_transit_checks_count_every_collision_check_of_the_transit(example, monk
     """Table I's transit checks are every collision check a transit makes, counted apart from the planner's own tally:
     each call of the collision checker while the transit runs. The example's Rest transit, from where the placing hand
     retreated (near the object: some pairs checked densely) to the final configuration."""
-    from planner.collision import CollisionChecker, build_collision_model
-    from planner.motion.graph import MotionGraph
-    from planner.motion.phases import PhasePlanner
+    from planner.collision import CollisionChecker
     from planner.motion.result import PHASES
     from planner.motion.situation import Situation
-    from planner.motion.step import contact_profile
-    from planner.motion.validity import transit_profile
     from planner.session import Session
 
     scene, roadmap, _ = example
-    robot, p = scene.robot, MotionParams()
+    robot = scene.robot
     motion = Session.open(EXAMPLE).result("motion")
     rest = np.flatnonzero(motion.phase == PHASES.index("Rest"))
     start = motion.q[rest[0] - 1]
     hands = np.concatenate(list(robot.hand_idx.values()))
     goal = motion.q[rest[np.flatnonzero(np.all(motion.q[rest][:, hands] == start[hands], axis=1))[-1]]]
-    planner = PhasePlanner(scene, build_collision_model(robot, scene.environment), MotionGraph(roadmap),
-                           transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
-                           np.random.default_rng(0), baseline)
+    planner = _phase_planner(scene, roadmap, baseline)
     calls = []
     check = CollisionChecker.in_collision
     monkeypatch.setattr(CollisionChecker, "in_collision", lambda self, *a, **k: calls.append(1) or check(self, *a, **k))
@@ -551,26 +540,19 @@ def test_the_carry_transit_can_use_the_roadmap_nodes(example):
     validity of the whole Carry transit pads those pairs as its two ends allow, so roadmap nodes near its start are
     valid there (with those pairs at the transit padding, none was, and the graph went unused). The example's Carry
     transit: the samples of phase Carry where no hand works at the object, the picking arm holding it."""
-    from planner.collision import build_collision_model
-    from planner.motion.graph import MotionGraph
-    from planner.motion.phases import PhasePlanner
     from planner.motion.result import PHASES
     from planner.motion.situation import Situation
     from planner.motion.space import JointSpace
-    from planner.motion.step import contact_profile
-    from planner.motion.validity import transit_profile
     from planner.session import Session
 
     scene, roadmap, _ = example
-    robot, p = scene.robot, MotionParams()
+    robot = scene.robot
     motion = Session.open(EXAMPLE).result("motion")
     carry = np.flatnonzero((motion.phase == PHASES.index("Carry")) & (motion.active == -1) & (motion.holder >= 0))
-    run = carry[: np.argmax(np.diff(carry) > 1) + 1] if np.any(np.diff(carry) > 1) else carry
+    run = np.split(carry, np.flatnonzero(np.diff(carry) > 1) + 1)[0]  # the first stretch: the transit
     q_start, q_goal = motion.q[run[0]], motion.q[run[-1]]
     arm = motion.arms[int(motion.holder[run[0]])]
-    planner = PhasePlanner(scene, build_collision_model(robot, scene.environment), MotionGraph(roadmap),
-                           transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
-                           np.random.default_rng(0), False)
+    planner = _phase_planner(scene, roadmap)
     hold = np.linalg.inv(motion.object_pose[run[0]]) @ planner.palm(q_start, arm)
     model = planner.model(Situation(arm, hold), q_start, planner.transit_idx)
     full, _ = planner.transit_validities(model, q_start, q_goal)
