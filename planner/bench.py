@@ -1,4 +1,4 @@
-"""`regrasp bench collision`: timings of the collision checker and of forward kinematics."""
+"""`regrasp bench ...`: timings of the collision checker and forward kinematics, the double grasps and the motion step."""
 from __future__ import annotations
 
 import time
@@ -132,6 +132,7 @@ class MotionBench:
 
     seeds: list
     runs: dict  # planner -> per seed: {"seconds", "success", "double_grasp", "phases": Table I rows, "phase_seconds"}
+    check_us: tuple[float, float] = (float("nan"), float("nan"))  # a full check's median µs before and after the runs
 
     def to_dict(self) -> dict:
         ours, rrt = (self.summary(p) for p in ("roadmap", "rrt"))
@@ -140,6 +141,7 @@ class MotionBench:
                 "ours_transit_checks_median": ours["transit_checks"], "rrt_transit_checks_median": rrt["transit_checks"],
                 "check_ratio": rrt["transit_checks"] / ours["transit_checks"] if ours["transit_checks"] > 0 else None,
                 "ours_success": ours["success"], "rrt_success": rrt["success"],
+                "full_check_us_before": self.check_us[0], "full_check_us_after": self.check_us[1],
                 "phases": {"ours": ours["phases"], "rrt": rrt["phases"]}, "runs": self.runs}
 
     def summary(self, planner: str) -> dict:
@@ -203,11 +205,16 @@ class MotionBench:
         out.append(f"speedup (RRTConnect median / ours): {d['speedup']:.2f}" if d["speedup"] else "speedup: n/a")
         if d["check_ratio"]:
             out.append(f"transit collision checks (RRTConnect median / ours): {d['check_ratio']:.2f} (a count: the same on any machine)")
+        out.append(f"a full collision check (regrasp bench collision) took {self.check_us[0]:.0f} µs before the runs and "
+                   f"{self.check_us[1]:.0f} µs after: the seconds above scale with it, the counts do not")
         return "\n".join(out)
 
 
 def _median(values: list) -> float:
     return float(np.median(values)) if values else float("nan")
+
+
+CHECK_SAMPLES = 500  # configurations a motion benchmark times a full check at, before and after its runs (about 0.1 s)
 
 
 def bench_motion(scene: Scene, seeds: int, folder, progress=print) -> MotionBench:
@@ -224,6 +231,7 @@ def bench_motion(scene: Scene, seeds: int, folder, progress=print) -> MotionBenc
     run_pipeline(base, until="roadmap")
     offline = {name: base.result(name) for name in ("arms", "pick_grasps", "place_grasps", "roadmap")}
     runs: dict = {"roadmap": [], "rrt": []}
+    before = bench_collision(scene, CHECK_SAMPLES).full_check_us_median
     for seed in range(seeds):
         results = dict(offline)
         for name in ONLINE_STEPS:
@@ -243,4 +251,4 @@ def bench_motion(scene: Scene, seeds: int, folder, progress=print) -> MotionBenc
                                   "phases": motion.phases, "phase_seconds": seconds, "phases_done": done,
                                   "failure": motion.failure})
             progress(f"seed {seed} {planner}: {elapsed:.2f} s, {'ok' if not motion.failure else motion.failure[:120]}")
-    return MotionBench(list(range(seeds)), runs)
+    return MotionBench(list(range(seeds)), runs, (before, bench_collision(scene, CHECK_SAMPLES).full_check_us_median))

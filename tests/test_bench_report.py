@@ -1,0 +1,35 @@
+"""The motion benchmark's report (Table I for both planners): its figures are the medians of the runs it is given, the
+speedup is the ratio of the two medians, and the JSON names what the issue asks for. Synthetic runs: the planners' own
+figures are measured by `regrasp bench motion`, never asserted on time."""
+from __future__ import annotations
+
+import json
+
+from planner.bench import MotionBench
+from planner.motion import PHASE_SECONDS, PHASES
+
+
+def _run(seed: int, seconds: float, checks: int, success: bool = True) -> dict:
+    """One seed's record as bench_motion keeps it: every phase done, `checks` transit checks in each."""
+    phases = [{"phase": name, "nodes_planning": 2, "nodes_validating": 0, "edges_invalidated": 1, "rrt_calls": 0,
+               "searches": 1, "transit_checks": checks, "path_length": 1.0, "duration": 2.0} for name in PHASES]
+    per_phase = [seconds / (len(PHASES) * len(PHASE_SECONDS) + 1)] * (len(PHASES) * len(PHASE_SECONDS)) + [0.0]
+    return {"seed": seed, "seconds": seconds, "success": success, "double_grasp": 0, "phases": phases,
+            "phase_seconds": per_phase, "phases_done": len(PHASES) if success else 0, "failure": "" if success else "x"}
+
+
+def test_speedup_is_the_ratio_of_the_median_seconds_and_the_check_cost_is_reported():
+    runs = {"roadmap": [_run(0, 1.0, 100), _run(1, 3.0, 300), _run(2, 2.0, 200, success=False)],
+            "rrt": [_run(0, 8.0, 800), _run(1, 4.0, 400), _run(2, 6.0, 600)]}
+    bench = MotionBench([0, 1, 2], runs, (61.5, 70.25))
+    d = bench.to_dict()
+    assert d["ours_total_seconds_median"] == 2.0 and d["rrt_total_seconds_median"] == 6.0
+    assert d["speedup"] == 3.0
+    assert d["ours_success"] == 2 / 3 and d["rrt_success"] == 1.0
+    assert d["ours_transit_checks_median"] == 4 * 200 and d["check_ratio"] == 3.0
+    assert (d["full_check_us_before"], d["full_check_us_after"]) == (61.5, 70.25)
+    assert [p["phase"] for p in d["phases"]["ours"]] == list(PHASES)
+    json.dumps(d)  # what --json writes
+    text = bench.render()
+    assert "speedup (RRTConnect median / ours): 3.00" in text
+    assert "took 62 µs before the runs and 70 µs after" in text
