@@ -91,6 +91,34 @@ def test_shortcuts_start_and_end_at_valid_states():
         assert all(rule.motion_valid(a, b, ends=False) for a, b in zip(out[:-1], out[1:]))
 
 
+def test_shortcuts_gaining_too_little_are_not_checked():
+    """A straight path has nothing to gain: with a minimum gain no shortcut of it is checked. An L-shaped one (legs of 1)
+    is checked only where the shortcut saves at least the minimum, and each kept shortcut does."""
+    class Counting:
+        def __init__(self):
+            self.calls = []
+
+        def state_valid(self, q):
+            return True
+
+        def motion_valid(self, qa, qb, ends=True):
+            self.calls.append((qa.copy(), qb.copy()))
+            return True
+
+    straight = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    rule = Counting()
+    out = shortcut(straight, rule, rule, np.random.default_rng(0), 16, min_gain=0.01)
+    assert rule.calls == [] and np.array_equal(out, straight)
+    corner = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    for seed in range(10):
+        rule = Counting()
+        path = shortcut(corner, rule, rule, np.random.default_rng(seed), 16, min_gain=0.1)
+        assert rule.calls, f"seed {seed}: no shortcut of the corner was checked"
+        a, b = rule.calls[0]  # the first: from the first leg (y = 0) to the second (x = 1), saving at least 0.1
+        assert a[1] == 0.0 and b[0] == 1.0 and (1.0 - a[0]) + b[1] - np.linalg.norm(b - a) >= 0.1 - 1e-12
+        assert np.linalg.norm(np.diff(path, axis=0), axis=1).sum() < 2.0
+
+
 def _phase_planner(scene, roadmap, baseline: bool = False):
     """The phase planner of a scene on the roadmap, with the default parameters and seed 0."""
     from planner.collision import build_collision_model

@@ -484,7 +484,7 @@ class PhasePlanner:
         except TransitFailed as exc:
             raise PieceFailed(phase, part, str(exc)) from exc
         t = time.perf_counter()
-        path = shortcut(path, full, near, self.rng, self.transit_params.shortcut_attempts)
+        path = shortcut(path, full, near, self.rng, self.transit_params.shortcut_attempts, self.transit_params.shortcut_min_gain)
         stats.seconds_shortcut += time.perf_counter() - t
         return Piece(phase, part, path, situation)
 

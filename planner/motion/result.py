@@ -36,6 +36,7 @@ class MotionParams:
     rrt_motions: int = 20000  # motion checks one RRTConnect query of the baseline planner ('rrt') may make
     rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension, joint-space distance)
     shortcut_attempts: int = 16  # random shortcuts per transit
+    shortcut_min_gain: float = 0.1  # rad: a shortcut shortening the path (joint-space length) by less is not checked
     goal_nodes: int = 16  # transit: an end the graph cannot reach is reconnected to this many of its nearest valid nodes
     max_double_grasps: int = 20  # double grasps tried, best first
     transit_env_padding: float = 0.03  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's),

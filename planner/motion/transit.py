@@ -39,6 +39,7 @@ class TransitParams:
     rrt_motions: int
     rrt_step: float
     shortcut_attempts: int
+    shortcut_min_gain: float
     goal_nodes: int
 
     @classmethod
@@ -248,11 +249,14 @@ def rrt_transit(space: JointSpace, full: MotionValidity, near: MotionValidity, q
     return found
 
 
-def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: np.random.Generator, attempts: int) -> np.ndarray:
+def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: np.random.Generator, attempts: int,
+             min_gain: float = 0.0) -> np.ndarray:
     """Random shortcuts between two points of the polyline (by arc length), kept when the two points and the straight
     motion between them are valid (checked with `near` when it leaves the first segment or reaches the last: close to
     the ends). The points are checked too: one inside a checked segment keeps the clearance, not the padding that a
-    motion check needs at both ends for its guarantee."""
+    motion check needs at both ends for its guarantee. A shortcut that would shorten the path by less than `min_gain`
+    (joint-space length) is not checked: a valid one costs every check of its segment, and once the path is nearly
+    straight most would gain nothing."""
     path = np.array(path, dtype=float)
     for _ in range(attempts):
         if len(path) < 3:
@@ -265,6 +269,8 @@ def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: 
             continue
         a = path[i] + (s1 - cum[i]) / max(seg[i], 1e-12) * (path[i + 1] - path[i])
         b = path[j] + (s2 - cum[j]) / max(seg[j], 1e-12) * (path[j + 1] - path[j])
+        if s2 - s1 - float(np.linalg.norm(b - a)) < min_gain:
+            continue
         if (near if i == 0 or j == len(seg) - 1 else full).motion_valid(a, b):
             path = np.concatenate([path[: i + 1], [a, b], path[j + 1:]])
     return _drop_duplicates(path)
