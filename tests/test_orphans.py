@@ -20,8 +20,12 @@ WORKERS_START_WITHIN = 900.0  # s: a cold cache builds the pair set, the finger 
 WORKERS_GONE_WITHIN = 30.0  # s: a timeout, not a measurement; the kernel kills them at once
 
 WORKBENCH_RUN = """
+import faulthandler
+import signal
 import sys
 from workbench import app
+
+faulthandler.register(signal.SIGUSR1, all_threads=True)  # where every thread is, should it not stop (see _stopped)
 
 
 class Running(app.Workbench):
@@ -116,10 +120,23 @@ def test_sigterm_of_plan_stops_its_workers_with_a_message(started, tmp_path: Pat
     assert [p.name for p in tmp_path.iterdir()] == ["s"], "the run wrote beside its session folder"
 
 
+def _stopped(proc: subprocess.Popen, timeout: float) -> int:
+    """The exit code of a workbench process asked to stop; if it has not stopped within `timeout`, the test fails with
+    every thread's stack (the workbench script dumps them on SIGUSR1)."""
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(2.0)
+        proc.kill()
+        _, stderr = proc.communicate()
+        pytest.fail(f"the workbench did not stop within {timeout:.0f} s; its threads:\n{stderr}")
+
+
 def test_sigterm_of_the_workbench_stops_a_running_steps_workers(started) -> None:
     proc, workers = started(_workbench())
     proc.send_signal(signal.SIGTERM)
-    assert proc.wait(timeout=120) == 0
+    assert _stopped(proc, 120) == 0
     stderr = proc.stderr.read() if proc.stderr else ""
     assert "Traceback" not in stderr, stderr
     assert not any(_running(w) for w in workers)
