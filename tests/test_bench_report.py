@@ -33,3 +33,6 @@ def test_speedup_is_the_ratio_of_the_median_seconds_and_the_check_cost_is_report
     text = bench.render()
     assert "speedup (RRTConnect median / ours): 3.00" in text
     assert "took 62 µs before the runs and 70 µs after" in text
+    assert d["repeat"] == 1 and "fastest" not in text
+    repeated = MotionBench([0, 1, 2], runs, (61.5, 70.25), repeat=3)
+    assert repeated.to_dict()["repeat"] == 3 and "median 2.00 s over 3 seeds (the fastest of 3 runs each)" in repeated.render()

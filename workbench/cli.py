@@ -81,7 +81,7 @@ def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
 def _cmd_bench_motion(args: argparse.Namespace) -> int:
     from planner.bench import bench_motion
 
-    return _bench_in_scratch(args, lambda scene, tmp, say: bench_motion(scene, args.seeds, tmp, say))
+    return _bench_in_scratch(args, lambda scene, tmp, say: bench_motion(scene, args.seeds, tmp, say, args.repeat))
 
 
 def step_params(assignments: list[str]) -> dict[str, dict[str, Any]]:
@@ -438,6 +438,9 @@ def parser() -> argparse.ArgumentParser:
     bm = command("motion", "Table I: the motion over seeds with the Super Graph and with RRTConnect alone", _cmd_bench_motion, parent=bsub)
     _add_task(bm)
     bm.add_argument("--seeds", type=int, default=10, help="online seeds 0..N-1 (the grasp lists and roadmap: seed 0, cached)")
+    bm.add_argument("--repeat", type=positive_int, default=1, metavar="K",
+                    help="plan each seed K times and keep its fastest run (the motion is the same each time; on a busy "
+                         "machine the fastest is the steadiest figure)")
     _add_json(bm, "the figures")
     return p
 
