@@ -92,8 +92,8 @@ def test_shortcuts_start_and_end_at_valid_states():
 
 
 def test_shortcuts_gaining_too_little_are_not_checked():
-    """A straight path has nothing to gain: with a minimum gain no shortcut of it is checked. An L-shaped one (legs of 1)
-    is checked only where the shortcut saves at least the minimum, and each kept shortcut does."""
+    """A straight path has nothing to gain: with a minimum gain no shortcut of it is checked. On an L-shaped one (legs of
+    1) shortcuts are checked, the first (one leg to the other) saving at least the minimum, and the path gets shorter."""
     class Counting:
         def __init__(self):
             self.calls = []
