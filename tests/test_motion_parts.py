@@ -588,3 +588,60 @@ def test_the_carry_transit_can_use_the_roadmap_nodes(example):
     nearest = np.argsort(space.distance(roadmap.node_q, q_start), kind="stable")[:48]
     valid = sum(full.on("changed").state_valid(space.full(space.reduce(roadmap.node_q[n]))) for n in nearest)
     assert valid >= 12, f"only {valid} of the 48 roadmap nodes nearest the Carry start are valid while it holds the object"
+
+
+@pytest.mark.slow
+def test_graded_checks_densely_only_beside_a_tight_end(example):
+    """The example's picking hand as it grasps, the statuette lowered until it is 3 mm from the hand: motions out of
+    there checked graded cost a fraction of the checks at paddings fitted to the 3 mm throughout, and each one it passes
+    keeps the hand off the statuette by the independent check at ten times the fitted resolution. Its paddings must be
+    ordered."""
+    from planner.motion.result import PHASES
+    from planner.motion.situation import OBJECT, Situation
+    from planner.motion.validity import Graded
+    from planner.session import Session
+
+    scene, roadmap, _ = example
+    motion = Session.open(EXAMPLE).result("motion")
+    q = motion.q[np.flatnonzero(motion.phase == PHASES.index("Carry"))[0]]
+    planner = _phase_planner(scene, roadmap)
+    idx = planner.transit_idx
+
+    def lowered(dz):
+        pose = scene.object_initial.copy()
+        pose[2, 3] -= dz
+        situation = Situation(None, pose)
+        model = planner.model(situation, q, idx)
+        obj = len(model.geometry.geometryObjects) - 1
+        gaps = [d for k, d in planner.clearances(model, q).items() if obj in model.ends[k]]
+        return situation, model, min(gaps, default=np.inf)
+
+    low, high = 0.0, 0.05
+    for _ in range(14):  # the drop that leaves 3 mm
+        low, high = ((low + high) / 2, high) if lowered((low + high) / 2)[2] < 0.003 else (low, (low + high) / 2)
+    situation, model, gap = lowered(high)
+    assert 0.0025 < gap < 0.0035, gap
+    goal = q.copy()
+    goal[idx] = scene.q_initial[idx]
+    full, near = planner.transit_validities(model, q, goal)
+    graded = Graded(full, near)
+    with pytest.raises(ValueError, match="coarse paddings must be at least"):
+        Graded(near, full)
+    rng = np.random.default_rng(3)
+    moved = np.isin(np.arange(len(q)), idx)
+    ends = [e for e in (q + moved * rng.normal(0.0, 0.3, len(q)) for _ in range(40)) if full.state_valid(e)][:6]
+    oracle = Oracle(scene)
+    spent = {"graded": 0, "fitted": 0}
+    passed = 0
+    for end in ends:  # RRT-like steps out of the tight spot
+        ok = {}
+        for name, validity in (("graded", graded), ("fitted", near)):
+            before = validity.checks
+            ok[name] = validity.motion_valid(q, end, ends=False)
+            spent[name] += validity.checks - before
+        if ok["graded"]:
+            passed += 1
+            for s in np.linspace(0.0, 1.0, 10 * near.samples(q, end, "object")):  # the pairs fitted to the 3 mm
+                assert not oracle.object_hits(q + s * (end - q), situation.pose)
+    assert passed, "some motions must pass"
+    assert spent["graded"] < 0.5 * spent["fitted"], spent

@@ -18,7 +18,7 @@ from planner.results import save_result
 from planner.roadmap import Roadmap, RoadmapParams, RoadmapPlanner, roadmap_for
 from planner.roadmap import build as roadmap_build
 from planner.roadmap.build import build_roadmap, roadmap_collision_model, segment_checker
-from planner.roadmap.local_planner import SegmentChecker, coarse_first, van_der_corput
+from planner.roadmap.local_planner import SegmentChecker, coarse_first, two_level, van_der_corput
 from planner.roadmap.step import session_roadmap_seed
 from planner.roadmap.super_graph import components, edge_candidates, node_candidates
 
@@ -267,3 +267,38 @@ def test_coarse_first_never_passes_a_segment_that_comes_nearer_than_the_clearanc
             assert passed, f"n={n} k={k}: failed though the pair stays beyond its padding"
         if nearest >= k:
             assert len(calls) == -(-(n - 1) // k) + 1 < n
+
+
+
+def test_two_level_never_passes_a_segment_that_comes_nearer_than_the_clearance():
+    """Analytic, two grids in any ratio (a transit end held close: n checks at the transit paddings, m > n at the
+    paddings fitted to it). Clearance c = 0, fine padding p = 1: between two of the m configurations a pair's distance
+    changes by at most 2 (p - c), so between two of the n by 2 P with P = (m - 1) / (n - 1), the coarse padding. A
+    V-shaped dip as steep as the bound, anywhere, to any depth: the segment passes only if d stays >= c, always when d
+    stays >= p; far from everything it costs the n coarse checks alone. `ends=False`: the ends are not checked fine."""
+    rng = np.random.default_rng(7)
+    for _ in range(3000):
+        n = int(rng.integers(2, 40))
+        m = n + int(rng.integers(1, 400))
+        coarse_padding = (m - 1) / (n - 1)
+        s0, depth, ends = rng.uniform(-0.2, 1.2), rng.uniform(-0.5, 1.5 * coarse_padding), bool(rng.integers(2))
+
+        def d(s):
+            return depth + 2.0 * (m - 1) * abs(s - s0)
+
+        calls = []
+
+        def hits(s, coarse):
+            calls.append((s, coarse))
+            return d(s) < (coarse_padding if coarse else 1.0)
+
+        if not ends and min(d(0.0), d(1.0)) < 1.0:
+            continue  # the ends must be valid at the fine padding to be skipped
+        nearest = min(d(s) for s in np.linspace(0.0, 1.0, 20 * m))
+        passed = two_level(n, m, hits, ends) is None
+        if passed:
+            assert nearest >= 0.0, f"n={n} m={m}: passed with the pair {-nearest:.3f} deep"
+        if nearest >= 1.0:
+            assert passed, f"n={n} m={m}: failed though the pair stays beyond its padding"
+        if nearest >= coarse_padding:
+            assert sorted(calls) == [(j / (n - 1), True) for j in range(n)]

@@ -45,7 +45,7 @@ from .result import PHASES
 from .situation import Situation, finger_geometries, fingertip_geometries, situation_model
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
-from .validity import Clearances, Profile, Validity, far, fits, make_validity
+from .validity import Clearances, Graded, Profile, Validity, far, fits, make_validity
 
 
 @dataclass(frozen=True)
@@ -465,11 +465,14 @@ class PhasePlanner:
 
     def _transit(self, phase: int, part: str, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, space: JointSpace,
                  full: Validity, near: Validity, arm: str | None) -> Piece:
-        """The transit's path, its ends checked first (see transit)."""
+        """The transit's path, its ends checked first (see transit); what touches an end is checked `near` where it
+        fails `full` (see Graded)."""
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not near.state_valid(q):
                 raise PieceFailed(phase, part, f"its {name} configuration collides ({_pairs(near.first_collision(q[None]))})")
         stats = self.stats[phase]
+        if near.seg is not full.seg:  # dense only beside what the ends hold close
+            near = Graded(full, near)
         try:
             if arm is not None:
                 limit = dataclasses.replace(self.transit_params, rrt_motions=self.transit_params.reconnect_motions)

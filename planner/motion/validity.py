@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision import CollisionModel, geometry_data
-from ..roadmap.local_planner import SegmentChecker, geometry_radii
+from ..roadmap.local_planner import SegmentChecker, geometry_radii, two_level
 
 
 class StateValidity(Protocol):
@@ -122,6 +122,41 @@ class Validity:
     def path_valid(self, path: np.ndarray) -> bool:
         """Every state and every segment of a polyline."""
         return self.path_hit(path) is None
+
+
+@dataclass(frozen=True, eq=False)
+class Graded:
+    """A motion validity checking a segment at `coarse`'s paddings and resolution, and at `fine`'s (lower paddings,
+    denser) only next to configurations that fail at coarse's: a transit end held close to something (an object just
+    lifted off the desk) needs dense checks beside it, not along the whole segment. Every interval between two checked
+    configurations is spanned at the resolution of the paddings both its ends passed at, so a valid motion keeps fine's
+    clearances (the same as coarse's) along the whole continuous segment. States are fine's."""
+
+    coarse: Validity
+    fine: Validity
+
+    def __post_init__(self):
+        a, b = self.coarse.seg.cm, self.fine.seg.cm
+        if a.ends.shape != b.ends.shape or np.any(a.ends != b.ends) or self.coarse.subset != self.fine.subset:
+            raise ValueError("a graded validity needs one model's pairs and subset at two sets of paddings")
+        if self.coarse.profile.name != self.fine.profile.name or np.any(a.paddings() < b.paddings()):
+            raise ValueError("a graded validity's coarse paddings must be at least its fine ones, for one profile")
+
+    @property
+    def checks(self) -> int:
+        return self.coarse.checks + (self.fine.checks if self.fine.seg is not self.coarse.seg else 0)
+
+    def state_valid(self, q: np.ndarray) -> bool:
+        return self.fine.state_valid(q)
+
+    def motion_valid(self, qa: np.ndarray, qb: np.ndarray, ends: bool = True) -> bool:
+        """The segment checked on coarse's grid, and on fine's next to what fails there (see two_level; `ends=False`:
+        both ends known valid at fine's paddings, checked at coarse's to spare the intervals beside them)."""
+        n, m = self.coarse.samples(qa, qb), self.fine.samples(qa, qb)
+        if m <= n:
+            return self.fine.motion_valid(qa, qb, ends)
+        dq = qb - qa
+        return two_level(n, m, lambda s, coarse: not (self.coarse if coarse else self.fine).state_valid(qa + s * dq), ends) is None
 
 
 KINDS = ("env", "self", "object")

@@ -159,19 +159,27 @@ class SegmentChecker:
 def coarse_first(n: int, k: int, hits: Callable[[float, bool], bool], ends: bool = True) -> float | None:
     """Where a segment checked at n evenly spaced configurations (parameters 0..1) fails, checked coarse first (see the
     module); None when it passes. `hits(s, coarse)`: whether the check at s fails, at the coarse paddings or at the
-    paddings. Every k-th of (at least) n configurations is checked coarse, in van der Corput order, one that fails there
-    at once at the paddings too (a collision is found early); then every configuration of the intervals next to one that
-    failed coarse. `ends=False`: both ends are known to pass at the paddings."""
+    paddings. Every k-th of (at least) n configurations is checked coarse (see two_level). `ends=False`: both ends are
+    known to pass at the paddings."""
     m = -(-(n - 1) // k)  # coarse intervals; m * k >= n - 1 fine ones
-    fine = m * k
-    clear = np.zeros(m + 1, dtype=bool)
-    for j in (van_der_corput(m + 1) * m).round().astype(int):
-        s = j * k / fine
+    return two_level(m + 1, m * k + 1, hits, ends)
+
+
+def two_level(n: int, m: int, hits: Callable[[float, bool], bool], ends: bool = True) -> float | None:
+    """Where a segment fails, checked at n evenly spaced configurations at coarse paddings and, only within the
+    intervals next to one that fails there, at the m (> n) evenly spaced configurations of its fine paddings; None
+    when it passes. `hits(s, coarse)`: whether the check at parameter s fails at the coarse or the fine paddings. The
+    coarse ones go in van der Corput order, one that fails there at once at the fine paddings too (a collision is found
+    early). Each interval between two checked configurations is then as short as the paddings both its ends passed at
+    need. `ends=False`: both ends are known to pass at the fine paddings."""
+    clear = np.zeros(n, dtype=bool)
+    for j in (van_der_corput(n) * (n - 1)).round().astype(int):
+        s = j / (n - 1)
         clear[j] = not hits(s, True)
-        if not clear[j] and (ends or 0 < j < m) and hits(s, False):
+        if not clear[j] and (ends or 0 < j < n - 1) and hits(s, False):
             return s
     for j in np.flatnonzero(~(clear[:-1] & clear[1:])):
-        for i in range(j * k + 1, (j + 1) * k):
-            if hits(i / fine, False):
-                return i / fine
+        for i in range(j * (m - 1) // (n - 1) + 1, -(-(j + 1) * (m - 1) // (n - 1))):  # strictly inside
+            if hits(i / (m - 1), False):
+                return i / (m - 1)
     return None
