@@ -600,7 +600,7 @@ class PhasePlanner:
             self.contact(3, "opening", np.stack([q_end, scene.q_final]), static_f, None)]
 
         # the transits: independent of each other now that every contact motion is made; run longest first as measured
-        # (Place's, Rest's, Carry's, Grasp's, the arm away), so the last to finish is a short one
+        # (Carry's, Place's, Rest's, Grasp's, the arm away), so the last to finish is a short one
         to_grasp = (0, lambda: self.reach(0, scene.q_initial, grasps, first_grasp, static_i))
         to_rest = (3, lambda: [self.transit(3, retreat_b[-1].path[-1], q_end, static_f)])
         if direct:  # carried by the one hand from the lift to above the placement
@@ -613,9 +613,9 @@ class PhasePlanner:
         q_retreat = retreat_a[-1].path[-1]
         targets = self.away_targets(q_retreat, a.arm, q_place, held_b)
         start = targets[0] if targets else q_retreat
-        to_place, rest, carry, to_grasp, away = self.transits([
-            (2, lambda: self.reach(2, start, downs, first_down, held_b)), to_rest,
-            (1, lambda: self.reach(1, q_lifted, exchanges, first_exchange, held_a)), to_grasp,
+        carry, to_place, rest, to_grasp, away = self.transits([
+            (1, lambda: self.reach(1, q_lifted, exchanges, first_exchange, held_a)),
+            (2, lambda: self.reach(2, start, downs, first_down, held_b)), to_rest, to_grasp,
             (2, lambda: self.away(q_retreat, a.arm, targets[:1], held_b))])
         raise_first([to_grasp, carry])
         if targets and not away:

@@ -100,10 +100,10 @@ class LazyTransit:
         e = self.graph.edges
         return self.space.distance(self.graph.q[e[:, 0]], self.graph.q[e[:, 1]])
 
-    def _connect(self, node: int) -> None:
+    def _connect(self, node: int) -> int:
         """Join a query end to its nearest graph nodes, nearest first, checking each node and edge, until `connections`
         valid edges join it or `max_connections` nodes were tried (the ends are where a phase differs most from the
-        roadmap: joined unchecked, the end's edges would be invalidated one search at a time)."""
+        roadmap: joined unchecked, the end's edges would be invalidated one search at a time); how many joined."""
         g, st = self.graph, self.status
         d = self.space.distance(g.q[: g.n_roadmap], g.q[node])
         joined = 0
@@ -114,6 +114,7 @@ class LazyTransit:
                 g.add_edges([(node, int(n))])
                 st.grow()
                 joined += self._edge_valid(node, int(n))
+        return joined
 
     def _node_valid(self, n: int) -> bool:
         st = self.status
@@ -184,8 +185,8 @@ class LazyTransit:
         self.ends = (start, goal)
         self.status.grow()
         self.status.node[[start, goal]] = VALID
-        self._connect(start)
-        self._connect(goal)
+        if self._connect(start):  # else the graph cannot help: the goal is reconnected to the start directly
+            self._connect(goal)
         stats.nodes_planning += 2
         stats.seconds_planning += time.perf_counter() - t0
         last: tuple[list[int], tuple[int, int]] | None = None
