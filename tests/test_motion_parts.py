@@ -597,7 +597,7 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
     keeps the hand off the statuette by the independent check at ten times the fitted resolution. Its paddings must be
     ordered."""
     from planner.motion.result import PHASES
-    from planner.motion.situation import OBJECT, Situation
+    from planner.motion.situation import Situation
     from planner.motion.validity import Graded
     from planner.session import Session
 

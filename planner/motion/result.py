@@ -25,7 +25,8 @@ class MotionParams:
     max_velocity: float = 1.0  # rad/s: joint speeds are capped here (and by the robot's own limits)
     max_acceleration: float = 2.0  # rad/s^2
     rate: float = 30.0  # Hz: the trajectory's sampling rate
-    connections: int = 4  # transit: valid edges joining each end to the graph (nearest nodes first) ...
+    connections: int = 4  # transit: edges joining each end to the graph, nearest valid nodes first (checked until one is
+    # valid; the rest when a path takes them) ...
     max_connections: int = 48  # ... among at most this many nearest nodes tried
     max_searches: int = 60  # transit: graph searches after invalidations before reconnecting
     max_reconnections: int = 2  # transit: RRTConnect calls per query (then the next candidate end is tried) ...

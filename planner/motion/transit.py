@@ -1,8 +1,9 @@
 """Transit motions (paper V-B): the Super Graph query with lazy revalidation, RRT reconnection, then shortcutting.
 
-The query joins the start and the goal to their nearest graph nodes (checked: the ends are where a
-phase differs most from the roadmap) and searches the graph disregarding the phase (Dijkstra over
-edges not known invalid). The path found is then validated in the phase from both ends inward,
+The query joins the start and the goal to their nearest valid graph nodes (the first edge of each
+checked: the ends are where a phase differs most from the roadmap; an end no edge joins is reconnected
+to the other at once) and searches the graph disregarding the phase (Dijkstra over edges not known
+invalid). The path found is then validated in the phase from both ends inward,
 each side stopping at its first invalid edge: roadmap nodes and edges only over the pairs the
 offline roadmap did not check ('changed': the object, a hand holding it), edges nobody checked
 offline (connections, earlier reconnections) over every pair. Invalid elements are marked and the
@@ -101,9 +102,10 @@ class LazyTransit:
         return self.space.distance(self.graph.q[e[:, 0]], self.graph.q[e[:, 1]])
 
     def _connect(self, node: int) -> int:
-        """Join a query end to its nearest graph nodes, nearest first, checking each node and edge, until `connections`
-        valid edges join it or `max_connections` nodes were tried (the ends are where a phase differs most from the
-        roadmap: joined unchecked, the end's edges would be invalidated one search at a time); how many joined."""
+        """Join a query end to its nearest valid graph nodes, nearest first: by checked edges until one is valid (an end
+        no edge joins, among `max_connections` nodes, is where a phase differs most from the roadmap: it is reconnected
+        at once), then by `connections` - 1 more edges unchecked, validated if a path takes them (an edge from an end is
+        long: the search takes one of them); how many joined."""
         g, st = self.graph, self.status
         d = self.space.distance(g.q[: g.n_roadmap], g.q[node])
         joined = 0
@@ -113,7 +115,7 @@ class LazyTransit:
             if self._node_valid(int(n)):
                 g.add_edges([(node, int(n))])
                 st.grow()
-                joined += self._edge_valid(node, int(n))
+                joined += 1 if joined else self._edge_valid(node, int(n))
         return joined
 
     def _node_valid(self, n: int) -> bool:
