@@ -214,6 +214,7 @@ class CollisionModel:
     ends: np.ndarray  # (n_pairs, 2) the geometry indices of each collision pair (read once: the pair list is slow to walk)
     support: np.ndarray  # (n_geometries, nq) bool: the joints that move each geometry
     pair_padding: tuple[tuple[int, float], ...] = ()  # (pair, padding): pairs padded otherwise than their kind
+    twins: np.ndarray | None = None  # (n_pairs,) the pair a screening pair stands for (a hull for its mesh), else -1
 
     def checker(self) -> "CollisionChecker":
         return CollisionChecker(self)
@@ -225,7 +226,14 @@ class CollisionModel:
         out[self.subsets.get("object", [])] = self.params.object_padding
         for pair, padding in self.pair_padding:
             out[pair] = padding
-        return out
+        return self.twinned(out)
+
+    def twinned(self, per_pair: np.ndarray) -> np.ndarray:
+        """A per-pair value with each screening pair given its twin's (in place)."""
+        if self.twins is not None:
+            screening = self.twins >= 0
+            per_pair[screening] = per_pair[self.twins[screening]]
+        return per_pair
 
     def relative_joints(self) -> np.ndarray:
         """(n_pairs, nq) bool: the joints whose motion changes each pair's relative pose (a joint above both geometries
@@ -293,14 +301,43 @@ def pair_table(cm: CollisionModel, per_pair: np.ndarray) -> np.ndarray:
     return out
 
 
-def geometry_data(cm: CollisionModel, subset: str) -> pin.GeometryData:
-    """Fresh collision data of `cm` with only the subset's pairs active, each padded as the model says (see paddings)."""
-    active = np.zeros(len(cm.ends), dtype=bool)
-    active[cm.subsets[subset]] = True
+def geometry_data(cm: CollisionModel, subset: str | np.ndarray) -> pin.GeometryData:
+    """Fresh collision data of `cm` with only the subset's pairs (a name, or pair indices) active, each padded as the
+    model says (see paddings)."""
     gd = pin.GeometryData(cm.geometry)
-    gd.setActiveCollisionPairs(cm.geometry, pair_table(cm, active), True)
+    gd.setActiveCollisionPairs(cm.geometry, active_table(cm, subset), True)
     gd.setSecurityMargins(cm.geometry, pair_table(cm, cm.paddings()), True, False)
     return gd
+
+
+def active_table(cm: CollisionModel, subset: str | np.ndarray) -> np.ndarray:
+    """The pair table of a subset (a name, or pair indices) as pinocchio activates pairs."""
+    active = np.zeros(len(cm.ends), dtype=bool)
+    active[cm.subsets[subset] if isinstance(subset, str) else subset] = True
+    return pair_table(cm, active)
+
+
+@dataclass(frozen=True)
+class Screen:
+    """A subset checked first with screening pairs in place of their twins (see CollisionChecker.in_collision)."""
+
+    screened: np.ndarray  # the pair table with the screening pairs active instead of their twins
+    exact: np.ndarray  # the subset's own pair table
+    screening: np.ndarray  # (n_pairs,) bool: the screening pairs
+
+
+def screen_of(cm: CollisionModel, subset: str) -> Screen | None:
+    """The subset's screen, when it has pairs with a screening twin."""
+    if cm.twins is None:
+        return None
+    pairs = cm.subsets[subset]
+    stand_in = np.full(len(cm.ends), -1)
+    screening = cm.twins >= 0
+    stand_in[cm.twins[screening]] = np.flatnonzero(screening)
+    if not np.any(stand_in[pairs] >= 0):
+        return None
+    screened = np.where(stand_in[pairs] >= 0, stand_in[pairs], pairs)
+    return Screen(active_table(cm, screened), active_table(cm, pairs), screening)
 
 
 class CollisionChecker:
@@ -314,13 +351,19 @@ class CollisionChecker:
         self._managers: dict[str, object] = {}
         self._margins: dict[str, np.ndarray | None] = {}  # per subset: the margins table its data has (None: the model's)
         self._own_margins: np.ndarray | None = None
+        self._screens: dict[str, Screen | None] = {}  # per subset: its screen, if it has one
+        self._first: dict[str, object] = {}  # per screened subset: the callback that reports the first pair hit
         self.checks = 0
 
     def _subset(self, subset: str, margins: np.ndarray | None = None) -> tuple[pin.GeometryData, object]:
         if subset not in self._managers:
             if subset not in self.cm.subsets:
                 raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
+            self._screens[subset] = screen = screen_of(self.cm, subset)
             gd = geometry_data(self.cm, subset)
+            if screen is not None:
+                gd.setActiveCollisionPairs(self.cm.geometry, screen.screened, True)
+                self._first[subset] = pin.CollisionCallBackDefault(self.cm.geometry, gd, True)  # tells which pair hit
             self._gdata[subset] = gd
             self._managers[subset] = pin.BroadPhaseManager_NaiveCollisionManager(self.model, self.cm.geometry, gd)
             self._margins[subset] = None
@@ -338,18 +381,40 @@ class CollisionChecker:
         paddings) pads the pairs otherwise than the model says, for this call."""
         self.checks += 1
         gd, manager = self._subset(subset, margins)
-        if not placed:
-            return bool(pin.computeCollisions(self.model, self.data, manager, q, True))
-        pin.updateGeometryPlacements(self.model, self.data, self.cm.geometry, gd, q)
-        for index, T in placed.items():
-            gd.oMg[index] = se3(T)
-        manager.update(False)
-        return bool(pin.computeCollisions(manager, True))
+        screen = self._screens[subset]
+        if placed:
+            pin.updateGeometryPlacements(self.model, self.data, self.cm.geometry, gd, q)
+            for index, T in placed.items():
+                gd.oMg[index] = se3(T)
+            manager.update(False)
+        if screen is None:
+            return bool(pin.computeCollisions(manager, True) if placed else
+                        pin.computeCollisions(self.model, self.data, manager, q, True))
+        first = self._first[subset]
+        hit = bool(pin.computeCollisions(manager, first) if placed else
+                   pin.computeCollisions(self.model, self.data, manager, first, q))
+        if not hit or not screen.screening[first.collisionPairIndex]:
+            return hit
+        # a screening pair (the object's hull, which holds its mesh) is hit first: the subset's own pairs decide
+        gm = self.cm.geometry
+        gd.setActiveCollisionPairs(gm, screen.exact, True)
+        try:
+            manager.update(False)  # the boxes are inflated by the margins of the active pairs
+            return bool(pin.computeCollisions(manager, True))
+        finally:
+            gd.setActiveCollisionPairs(gm, screen.screened, True)
 
     def colliding_pairs(self, q: np.ndarray, subset: str = "all") -> list[tuple[str, str]]:
         """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
         gd, _ = self._subset(subset)
-        pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
+        screen = self._screens[subset]
+        if screen is not None:
+            gd.setActiveCollisionPairs(self.cm.geometry, screen.exact, True)
+        try:
+            pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
+        finally:
+            if screen is not None:
+                gd.setActiveCollisionPairs(self.cm.geometry, screen.screened, True)
         objs, pairs, results = self.cm.geometry.geometryObjects, self.cm.geometry.collisionPairs, gd.collisionResults
         hits = [int(k) for k in self.cm.subsets[subset] if results[int(k)].isCollision()]
         return [(objs[pairs[k].first].name, objs[pairs[k].second].name) for k in hits]

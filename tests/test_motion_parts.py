@@ -645,3 +645,42 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
                 assert not oracle.object_hits(q + s * (end - q), situation.pose)
     assert passed, "some motions must pass"
     assert spent["graded"] < 0.5 * spent["fitted"], spent
+
+
+@pytest.mark.slow
+def test_the_hull_screen_changes_no_answer(example):
+    """A situation model whose object pairs are screened by the object's convex hull answers every check as the same
+    model without the screen: along the example's Carry, where the placing hand closes on the statuette, so that some
+    configurations hit the hull and not the statuette (counted with a model whose object is the hull itself)."""
+    import coal
+
+    from planner.collision import build_collision_model
+    from planner.geometry import coal_convex, coal_mesh
+    from planner.motion.result import PHASES
+    from planner.motion.situation import Situation, situation_model
+    from planner.motion.validity import make_validity, transit_profile
+    from planner.session import Session
+
+    scene, roadmap, _ = example
+    robot = scene.robot
+    motion = Session.open(EXAMPLE).result("motion")
+    carry = np.flatnonzero(motion.phase == PHASES.index("Carry"))
+    arm = robot.spec.arm_names[motion.holder[carry[0]]]
+    planner = _phase_planner(scene, roadmap)
+    situation = Situation(arm, np.linalg.inv(motion.object_pose[carry[0]]) @ planner.palm(motion.q[carry[0]], arm))
+    cm = build_collision_model(robot, scene.environment)
+    idx = planner.transit_idx
+    profile = transit_profile(roadmap.resolution, 0.02, 0.008)
+    hull: coal.CollisionGeometry = coal_convex(scene.object_mesh.convex_hull)
+    mesh = coal_mesh(scene.object_mesh)
+    screened, plain, as_hull = (make_validity(situation_model(cm, shape, situation, (), idx, screen), profile, "moving")
+                                for shape, screen in ((mesh, hull), (mesh, None), (hull, None)))
+    assert screened.seg.cm.twins is not None and plain.seg.cm.twins is None
+    hull_only = 0
+    for q in motion.q[carry[::2]]:
+        for subset in ("moving", "changed", "object"):
+            answer = plain.on(subset).state_valid(q)
+            assert screened.on(subset).state_valid(q) == answer, f"subset {subset}"
+            hull_only += answer and not as_hull.on(subset).state_valid(q)
+        assert screened.colliding_pairs(q) == plain.colliding_pairs(q)
+    assert hull_only, "some configurations must hit the hull and not the statuette"

@@ -35,7 +35,7 @@ import pinocchio as pin
 from ..arm_ik import ArmIK
 from ..collision import CollisionModel
 from ..forked import forked_map
-from ..geometry import coal_mesh, transform3s
+from ..geometry import coal_convex, coal_mesh, transform3s
 from ..hand_placement import world_aabb
 from ..reach import approach_direction
 from ..roadmap.local_planner import geometry_radii
@@ -95,6 +95,7 @@ class PhasePlanner:
         self.scene, self.robot, self.cm, self.graph = scene, scene.robot, cm, graph
         self.transit_profile, self.contact_profile, self.p, self.rng, self.baseline = transit, contact, params, rng, baseline
         self.shape = coal_mesh(scene.object_mesh)
+        self.hull = coal_convex(scene.object_mesh.convex_hull)  # screens the mesh: see situation_model
         self.data = self.robot.model.createData()
         self.iks: dict[tuple[str, ...], ArmIK] = {}  # one solver (and its scratch data) per set of arms
         self.stats = [TransitStats() for _ in PHASES]
@@ -322,7 +323,7 @@ class PhasePlanner:
                       if not np.allclose(q[self.robot.hand_idx[a]], self.open[self.robot.hand_idx[a]]))
         key = (situation, moved, np.asarray(moving).tobytes())
         if key not in self.models:
-            self.models[key] = situation_model(self.cm, self.shape, situation, moved, moving)
+            self.models[key] = situation_model(self.cm, self.shape, situation, moved, moving, self.hull)
         return self.models[key]
 
     def contact(self, phase: int, part: str, path: np.ndarray, situation: Situation, hand: str | None) -> Piece:

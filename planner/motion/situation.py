@@ -67,9 +67,11 @@ def finger_geometries(cm: CollisionModel, arm: str) -> np.ndarray:
 
 
 def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation: Situation,
-                    moved_hands: tuple[str, ...], moving: np.ndarray) -> CollisionModel:
+                    moved_hands: tuple[str, ...], moving: np.ndarray, hull: coal.CollisionGeometry | None = None) -> CollisionModel:
     """A copy of `cm` with the object in `situation` and the subsets 'object', 'changed' and 'moving' (see the module):
-    'moving' and 'changed' keep only the pairs whose relative pose the configuration indices `moving` change."""
+    'moving' and 'changed' keep only the pairs whose relative pose the configuration indices `moving` change. With
+    `hull` (the object's convex hull), every pair of the object has a screening twin with the hull, in no subset: a
+    check tries the hull first, and the mesh only where the hull is hit (see CollisionChecker.in_collision)."""
     robot = cm.robot
     gm = cm.geometry.copy()
     objs = gm.geometryObjects
@@ -77,35 +79,42 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
     env = [e for e in range(cm.n_robot_geoms, n_geoms) if objs[e].name.removeprefix("env/") not in situation.support]
     skip = set(situation.touching)
     if situation.holder is None:
-        gm.addGeometryObject(pin.GeometryObject(OBJECT, 0, 0, se3(situation.pose), shape))
+        parent, placement = 0, situation.pose
         robot_partners = [g for g in range(cm.n_robot_geoms) if objs[g].parentJoint > 0 and objs[g].name not in skip]
         env_partners = []
     else:
         palm = robot.model.frames[robot.frame_id(robot.palm_frame(situation.holder))]
-        placement = palm.placement.homogeneous @ np.linalg.inv(situation.pose)
-        gm.addGeometryObject(pin.GeometryObject(OBJECT, palm.parentJoint, 0, se3(placement), shape))
+        parent, placement = palm.parentJoint, palm.placement.homogeneous @ np.linalg.inv(situation.pose)
         hand = f"{situation.holder}_hand"
         robot_partners = [g for g in range(cm.n_robot_geoms) if cm.parts[g] != hand and objs[g].name not in skip]
         env_partners = env
+    bodies = [(OBJECT, shape)] + ([] if hull is None else [(f"{OBJECT} hull", hull)])
+    for name, geometry in bodies:
+        gm.addGeometryObject(pin.GeometryObject(name, parent, 0, se3(placement), geometry))
     o = n_geoms
     n_pairs = len(gm.collisionPairs)
-    for g in env_partners:
-        gm.addCollisionPair(pin.CollisionPair(g, o))
-    for g in robot_partners:
-        gm.addCollisionPair(pin.CollisionPair(g, o))
+    partners = env_partners + robot_partners
+    for body in range(len(bodies)):
+        for g in partners:
+            gm.addCollisionPair(pin.CollisionPair(g, o + body))
     new_env = np.arange(n_pairs, n_pairs + len(env_partners))
-    new_robot = np.arange(n_pairs + len(env_partners), len(gm.collisionPairs))
+    new_robot = np.arange(n_pairs + len(env_partners), n_pairs + len(partners))
     moved = np.concatenate([finger_geometries(cm, arm) for arm in moved_hands] + [np.zeros(0, np.int64)])
     hand_pairs = np.flatnonzero(np.isin(cm.ends, moved).any(axis=1))
-    new = np.arange(n_pairs, len(gm.collisionPairs))
+    new = np.arange(n_pairs, n_pairs + len(partners))
     subsets = {**cm.subsets,
                "all": np.concatenate([cm.subsets["all"], new]),
                "env": np.concatenate([cm.subsets["env"], new_env]),
                "object": new_robot}
-    ends = np.concatenate([cm.ends, np.array([(g, o) for g in env_partners + robot_partners], np.int64).reshape(-1, 2)])
-    support = np.concatenate([cm.support, joint_support(robot.model, [gm.geometryObjects[o].parentJoint])])
+    ends = np.concatenate([cm.ends] + [np.array([(g, o + body) for g in partners], np.int64).reshape(-1, 2)
+                                       for body in range(len(bodies))])
+    twins = None
+    if hull is not None:  # the hull's pairs stand for the mesh's
+        twins = np.full(len(ends), -1, dtype=np.int64)
+        twins[n_pairs + len(partners):] = new
+    support = np.concatenate([cm.support, joint_support(robot.model, [parent] * len(bodies))])
     support.setflags(write=False)  # the model is shared read-only
-    out = dataclasses.replace(cm, geometry=gm, subsets=subsets, ends=ends, support=support)
+    out = dataclasses.replace(cm, geometry=gm, subsets=subsets, ends=ends, support=support, twins=twins)
     changes = out.relative_joints()[:, moving].any(axis=1)
     changed = np.concatenate([hand_pairs, new])
     return _moving_only(out, changes, changed[changes[changed]])
@@ -114,8 +123,8 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
 def _moving_only(cm: CollisionModel, keep: np.ndarray, changed: np.ndarray) -> CollisionModel:
     """`cm` with the pairs `keep` (a flag per pair) alone in its geometry model (changed in place: situation_model's own
     copy), ordered as pinocchio orders them (by
-    their two geometry indices), its subsets renumbered, 'moving' all of them and 'changed' the pairs `changed` (indices
-    before): a motion checks no other pair, and pinocchio's collision data of a model costs about 5 kB per pair (12 MB
+    their two geometry indices), its subsets renumbered, 'moving' all of them but screening pairs and 'changed' the pairs
+    `changed` (indices before): a motion checks no other pair, and pinocchio's collision data of a model costs about 5 kB per pair (12 MB
     for the whole robot's), to allocate and to free, every time a validity is made."""
     ends = np.sort(cm.ends[keep], axis=1)
     order = np.lexsort((ends[:, 1], ends[:, 0]))
@@ -127,6 +136,12 @@ def _moving_only(cm: CollisionModel, keep: np.ndarray, changed: np.ndarray) -> C
     renumber = np.full(len(cm.ends), -1, dtype=np.int64)
     renumber[np.flatnonzero(keep)[order]] = np.arange(len(ends))
     subsets = {name: np.sort(renumber[idx][renumber[idx] >= 0]) for name, idx in cm.subsets.items()}
-    subsets["moving"], subsets["changed"] = np.arange(len(ends)), np.sort(renumber[changed])
+    twins = None
+    if cm.twins is not None:  # a twin's relative pose is its screening pair's: both are kept or neither
+        twins = np.full(len(ends), -1, dtype=np.int64)
+        screening = np.flatnonzero((cm.twins >= 0) & keep)
+        twins[renumber[screening]] = renumber[cm.twins[screening]]
+    subsets["moving"] = np.flatnonzero(twins < 0) if twins is not None else np.arange(len(ends))
+    subsets["changed"] = np.sort(renumber[changed])
     ends.setflags(write=False)
-    return dataclasses.replace(cm, subsets=subsets, ends=ends)
+    return dataclasses.replace(cm, subsets=subsets, ends=ends, twins=twins)

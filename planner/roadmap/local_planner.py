@@ -91,7 +91,7 @@ def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, 
     keep = np.full(len(cm.ends), self_clearance)
     keep[cm.subsets["env"]] = env_clearance
     keep[cm.subsets.get("object", [])] = object_clearance
-    out = cm.paddings() - keep
+    out = cm.paddings() - cm.twinned(keep)
     if np.any(out <= 0):
         raise ValueError("each padding must exceed the clearance it guarantees")
     return out
