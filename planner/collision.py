@@ -378,7 +378,9 @@ class CollisionChecker:
                      margins: np.ndarray | None = None) -> bool:
         """True if any pair of the subset collides at q; `placed` (geometry index -> world pose) moves fixed geometries
         for this call, in this checker's own data: the shared model is never written; `margins` (a `pair_table` of
-        paddings) pads the pairs otherwise than the model says, for this call."""
+        paddings) pads the pairs otherwise than the model says, for this call. A subset with screening pairs (see
+        `CollisionModel.twins`) is checked with them in place of their twins, and as itself only when one of them is the
+        first pair hit: a screening geometry holds its twin's, so the answer is the subset's own."""
         self.checks += 1
         gd, manager = self._subset(subset, margins)
         screen = self._screens[subset]

@@ -597,7 +597,7 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
     keeps the hand off the statuette by the independent check at ten times the fitted resolution. Its paddings must be
     ordered."""
     from planner.motion.result import PHASES
-    from planner.motion.situation import Situation
+    from planner.motion.situation import OBJECT, Situation
     from planner.motion.validity import Graded
     from planner.session import Session
 
@@ -612,7 +612,7 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
         pose[2, 3] -= dz
         situation = Situation(None, pose)
         model = planner.model(situation, q, idx)
-        obj = len(model.geometry.geometryObjects) - 1
+        obj = [o.name for o in model.geometry.geometryObjects].index(OBJECT)
         gaps = [d for k, d in planner.clearances(model, q).items() if obj in model.ends[k]]
         return situation, model, min(gaps, default=np.inf)
 
