@@ -287,7 +287,7 @@ class PhasePlanner:
         once, and the object's, once for each place it hangs from (its parent joint and placement)."""
         key = (id(model), profile, pair_padding)
         if key not in self.validities:
-            held = model.geometry.geometryObjects[-1]  # the object, added last (situation_model)
+            held = model.geometry.geometryObjects[-1]  # the object or its hull, added last: both hang where it does
             where = (held.parentJoint, held.placement.homogeneous.tobytes())
             if where not in self.situation_radii:
                 self.situation_radii[where] = geometry_radii(model, self.radii)
