@@ -122,10 +122,10 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
 
 def _moving_only(cm: CollisionModel, keep: np.ndarray, changed: np.ndarray) -> CollisionModel:
     """`cm` with the pairs `keep` (a flag per pair) alone in its geometry model (changed in place: situation_model's own
-    copy), ordered as pinocchio orders them (by
-    their two geometry indices), its subsets renumbered, 'moving' all of them but screening pairs and 'changed' the pairs
-    `changed` (indices before): a motion checks no other pair, and pinocchio's collision data of a model costs about 5 kB per pair (12 MB
-    for the whole robot's), to allocate and to free, every time a validity is made."""
+    copy), ordered as pinocchio orders them (by their two geometry indices), its subsets renumbered, 'moving' all of them
+    but screening pairs and 'changed' the pairs `changed` (indices before): a motion checks no other pair, and
+    pinocchio's collision data of a model costs about 5 kB per pair (12 MB for the whole robot's), to allocate and to
+    free, every time a validity is made."""
     ends = np.sort(cm.ends[keep], axis=1)
     order = np.lexsort((ends[:, 1], ends[:, 0]))
     ends = ends[order]
