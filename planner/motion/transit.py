@@ -187,7 +187,7 @@ class LazyTransit:
         self.ends = (start, goal)
         self.status.grow()
         self.status.node[[start, goal]] = VALID
-        if self._connect(start):  # else the graph cannot help: the goal is reconnected to the start directly
+        if self._connect(start):  # else the graph cannot help: the start is reconnected to the goal directly
             self._connect(goal)
         stats.nodes_planning += 2
         stats.seconds_planning += time.perf_counter() - t0
