@@ -406,9 +406,10 @@ class CollisionChecker:
         finally:
             gd.setActiveCollisionPairs(gm, screen.screened, True)
 
-    def colliding_pairs(self, q: np.ndarray, subset: str = "all") -> list[tuple[str, str]]:
-        """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
-        gd, _ = self._subset(subset)
+    def colliding(self, q: np.ndarray, subset: str = "all", margins: np.ndarray | None = None) -> list[int]:
+        """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says
+        (None: the model's paddings); `distance` then measures them."""
+        gd, _ = self._subset(subset, margins)
         screen = self._screens[subset]
         if screen is not None:
             gd.setActiveCollisionPairs(self.cm.geometry, screen.exact, True)
@@ -417,6 +418,14 @@ class CollisionChecker:
         finally:
             if screen is not None:
                 gd.setActiveCollisionPairs(self.cm.geometry, screen.screened, True)
-        objs, pairs, results = self.cm.geometry.geometryObjects, self.cm.geometry.collisionPairs, gd.collisionResults
-        hits = [int(k) for k in self.cm.subsets[subset] if results[int(k)].isCollision()]
-        return [(objs[pairs[k].first].name, objs[pairs[k].second].name) for k in hits]
+        results = gd.collisionResults
+        return [int(k) for k in self.cm.subsets[subset] if results[int(k)].isCollision()]
+
+    def distance(self, pair: int, subset: str) -> float:
+        """The distance of a pair of the subset where `colliding` last placed the geometries."""
+        return float(pin.computeDistance(self.cm.geometry, self._gdata[subset], pair).min_distance)
+
+    def colliding_pairs(self, q: np.ndarray, subset: str = "all", margins: np.ndarray | None = None) -> list[tuple[str, str]]:
+        """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
+        objs, pairs = self.cm.geometry.geometryObjects, self.cm.geometry.collisionPairs
+        return [(objs[pairs[k].first].name, objs[pairs[k].second].name) for k in self.colliding(q, subset, margins)]

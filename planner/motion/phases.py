@@ -33,7 +33,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..arm_ik import ArmIK
-from ..collision import CollisionModel
+from ..collision import CollisionChecker, CollisionModel
 from ..forked import forked_map
 from ..geometry import coal_convex, coal_mesh, transform3s
 from ..hand_placement import world_aabb
@@ -108,6 +108,7 @@ class PhasePlanner:
         self.models: dict[tuple, CollisionModel] = {}
         self.validities: dict[tuple, Validity] = {}
         self.distances: dict[int, Clearances] = {}
+        self.checkers: dict[int, CollisionChecker] = {}  # per situation model: one scratch data for all its checks
         self.checked: dict[tuple[int, bytes], np.ndarray | None] = {}  # see valid
         self.measured: dict[tuple[int, bytes], dict[int, float]] = {}  # see clearances
         self.finger_names = {arm: self.finger_of_geometry(arm) for arm in robot.spec.arm_names}
@@ -270,8 +271,15 @@ class PhasePlanner:
     def meter(self, model: CollisionModel) -> Clearances:
         """The clearance measure of a situation's model over its moving pairs (scratch data built once per model)."""
         if id(model) not in self.distances:
-            self.distances[id(model)] = Clearances(model, "moving", far(self.transit_profile))
+            self.distances[id(model)] = Clearances(model, "moving", far(self.transit_profile), self.checker(model))
         return self.distances[id(model)]
+
+    def checker(self, model: CollisionModel) -> CollisionChecker:
+        """The collision scratch data of a situation's model, shared by its validities and clearance meter (each pads
+        the pairs its own way): pinocchio's costs milliseconds to make, and megabytes a forked worker must copy."""
+        if id(model) not in self.checkers:
+            self.checkers[id(model)] = model.checker()
+        return self.checkers[id(model)]
 
     def clearances(self, model: CollisionModel, q: np.ndarray) -> dict[int, float]:
         """A situation's near pairs at q and their distances (see validity.Clearances), measured once per configuration
@@ -291,7 +299,8 @@ class PhasePlanner:
             where = (held.parentJoint, held.placement.homogeneous.tobytes())
             if where not in self.situation_radii:
                 self.situation_radii[where] = geometry_radii(model, self.radii)
-            self.validities[key] = make_validity(model, profile, "moving", self.situation_radii[where], pair_padding)
+            self.validities[key] = make_validity(model, profile, "moving", self.situation_radii[where], pair_padding,
+                                                 self.checker(model))
         return self.validities[key]
 
     def backoff(self, q: np.ndarray, arm: str) -> np.ndarray:

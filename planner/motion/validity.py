@@ -15,9 +15,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-import pinocchio as pin
 
-from ..collision import CollisionModel, geometry_data
+from ..collision import CollisionChecker, CollisionModel, pair_table
 from ..roadmap.local_planner import SegmentChecker, geometry_radii, two_level
 
 
@@ -103,7 +102,7 @@ class Validity:
 
     def colliding_pairs(self, q: np.ndarray | None) -> list[tuple[str, str]]:
         """The pairs of the subset colliding at q, by geometry name (none for None: for messages and pre-shape choices)."""
-        return [] if q is None else self.seg.checker.colliding_pairs(q, self.subset)
+        return [] if q is None else self.seg.colliding_pairs(q, self.subset)
 
     def first_collision(self, path: np.ndarray) -> list[tuple[str, str]]:
         """The colliding pairs where a polyline first fails its checks (see path_hit)."""
@@ -165,29 +164,24 @@ KINDS = ("env", "self", "object")
 class Clearances:
     """The distances at a configuration of a subset's pairs nearer than `far[kind]` (what a profile cannot use beyond:
     see `far`), by pair, and the smallest per kind: with an obstacle ('env'), robot–object pairs ('object') and
-    robot–robot pairs ('self'). Scratch data built once per model.
+    robot–robot pairs ('self'). `checker`: the model's collision scratch data, shared with its validities.
 
     Only pairs nearer than `far` are measured: a collision check with `far` as the security margin finds them (GJK stops
     early on pairs far apart), then their exact distances are computed; measuring every pair cost ten times more."""
 
-    def __init__(self, cm: CollisionModel, subset: str, far: dict[str, float]):
-        self.cm = cm
-        self.data = cm.robot.model.createData()
-        self.pairs = np.asarray(cm.subsets[subset], dtype=np.int64)
+    def __init__(self, cm: CollisionModel, subset: str, far: dict[str, float], checker: CollisionChecker | None = None):
+        self.cm, self.subset = cm, subset
+        self.checker = checker or cm.checker()
         kind = np.full(len(cm.geometry.collisionPairs), "self", dtype=object)
         kind[cm.subsets["env"]] = "env"
         kind[cm.subsets.get("object", [])] = "object"
         self.kind = kind  # of every pair of the model
         margins = dataclasses.replace(cm.params, **{f"{k}_padding": far[k] for k in KINDS})
-        self.gd = geometry_data(dataclasses.replace(cm, params=margins), subset)
+        self.margins = pair_table(cm, dataclasses.replace(cm, params=margins, pair_padding=()).paddings())
 
     def __call__(self, q: np.ndarray) -> dict[int, float]:
         """pair -> distance, for the subset's pairs nearer than `far` of their kind at q."""
-        model, gm, gd = self.cm.robot.model, self.cm.geometry, self.gd
-        pin.computeCollisions(model, self.data, gm, gd, q, False)
-        results = gd.collisionResults
-        return {int(k): float(pin.computeDistance(gm, gd, int(k)).min_distance)
-                for k in self.pairs if results[int(k)].isCollision()}
+        return {k: self.checker.distance(k, self.subset) for k in self.checker.colliding(q, self.subset, self.margins)}
 
     def by_kind(self, near: dict[int, float]) -> dict[str, float]:
         """The smallest distance of each kind among measured pairs (inf for a kind none of them is)."""
@@ -231,12 +225,13 @@ def _fit(padding: float, keep: float, have: float) -> float:
 
 
 def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all", known_radii: np.ndarray | None = None,
-                  pair_padding: tuple[tuple[int, float], ...] = ()) -> Validity:
+                  pair_padding: tuple[tuple[int, float], ...] = (), checker: CollisionChecker | None = None) -> Validity:
     """A validity of `cm` with the profile's paddings (the model's own are replaced), `pair_padding` ((pair, padding))
     overriding some pairs' (see Clearances.fitted_pairs); `known_radii`: the displacement radii of cm's first geometries
-    (geometry_radii of the model a situation extends), so only the object's are computed."""
+    (geometry_radii of the model a situation extends), so only the object's are computed; `checker`: cm's collision
+    scratch data, shared with its other validities (see SegmentChecker)."""
     cm = dataclasses.replace(cm, params=dataclasses.replace(cm.params, env_padding=profile.env_padding,
                                                             self_padding=profile.self_padding, object_padding=profile.object_padding),
                              pair_padding=pair_padding)
     return Validity(SegmentChecker(cm, profile.env_clearance, profile.self_clearance, profile.object_clearance,
-                                   geometry_radii(cm, known_radii), profile.coarse), profile, subset)
+                                   geometry_radii(cm, known_radii), profile.coarse, checker), profile, subset)

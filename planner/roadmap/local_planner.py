@@ -25,7 +25,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..collision import CollisionModel, pair_table
+from ..collision import CollisionChecker, CollisionModel, pair_table
 from ..results import frozen
 
 
@@ -99,14 +99,20 @@ def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, 
 
 class SegmentChecker:
     """Checks configurations and straight segments against named pair subsets (one per process); `coarse`: see the
-    module (1: every configuration at the paddings)."""
+    module (1: every configuration at the paddings). `checker`: collision scratch data to share with other segment
+    checkers of the same geometry and pairs at other paddings (each passes its own with every check): pinocchio's
+    collision data costs milliseconds to make and megabytes to hold. `checks` counts this one's own checks."""
 
     def __init__(self, cm: CollisionModel, env_clearance: float, self_clearance: float = 0.0, object_clearance: float = 0.0,
-                 radii: np.ndarray | None = None, coarse: int = 1):
+                 radii: np.ndarray | None = None, coarse: int = 1, checker: CollisionChecker | None = None):
         if coarse < 1:
             raise ValueError(f"the coarse factor must be a whole number >= 1, got {coarse}")
+        if checker is not None and (checker.cm.geometry is not cm.geometry or checker.cm.ends is not cm.ends):
+            raise ValueError("a shared collision checker must be of the same geometry model and pairs")
         self.cm = cm
-        self.checker = cm.checker()
+        self.checker = checker or cm.checker()
+        self.checks = 0
+        self._margins = pair_table(cm, cm.paddings())
         radii = geometry_radii(cm) if radii is None else radii
         sweep = cm.relative_joints() * (radii[cm.ends[:, 0]] + radii[cm.ends[:, 1]])
         allow = allowances(cm, env_clearance, self_clearance, object_clearance)
@@ -115,9 +121,14 @@ class SegmentChecker:
         self.coarse = int(coarse)
         self._coarse_margins = pair_table(cm, cm.paddings() + (self.coarse - 1) * allow) if coarse > 1 else None
 
-    @property
-    def checks(self) -> int:
-        return self.checker.checks
+    def in_collision(self, q: np.ndarray, subset: str, coarse: bool = False) -> bool:
+        """One check of q over a subset, at the paddings (or the coarse ones)."""
+        self.checks += 1
+        return self.checker.in_collision(q, subset, margins=self._coarse_margins if coarse else self._margins)
+
+    def colliding_pairs(self, q: np.ndarray, subset: str) -> list[tuple[str, str]]:
+        """The subset's pairs colliding at q at the paddings, by geometry name (for messages)."""
+        return self.checker.colliding_pairs(q, subset, self._margins)
 
     def weights(self, subset: str) -> np.ndarray:
         """(rows, nq) the subset's displacement weights per joint (computed once per subset)."""
@@ -134,7 +145,7 @@ class SegmentChecker:
         return np.ceil(sweep.max(axis=1, initial=0.0)).astype(int) + 1
 
     def free(self, q: np.ndarray, subset: str) -> bool:
-        return not self.checker.in_collision(q, subset)
+        return not self.in_collision(q, subset)
 
     def segment_free(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> bool:
         """True if every check of the segment passes (`ends=False`: the two ends are known free)."""
@@ -145,13 +156,13 @@ class SegmentChecker:
         n, dq = int(self.steps(qa, qb, subset)[0]), qb - qa
         if self._coarse_margins is not None and n > 2 * self.coarse + 1:
             def hits(s: float, coarse: bool) -> bool:
-                return self.checker.in_collision(qa + s * dq, subset, margins=self._coarse_margins if coarse else None)
+                return self.in_collision(qa + s * dq, subset, coarse)
 
             s = coarse_first(n, self.coarse, hits, ends)
             return None if s is None else qa + s * dq
         s = van_der_corput(n)
         for q in qa + np.outer(s if ends else s[2:], dq):
-            if self.checker.in_collision(q, subset):
+            if self.in_collision(q, subset):
                 return q
         return None
 
