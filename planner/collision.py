@@ -301,15 +301,6 @@ def pair_table(cm: CollisionModel, per_pair: np.ndarray) -> np.ndarray:
     return out
 
 
-def geometry_data(cm: CollisionModel, subset: str | np.ndarray) -> pin.GeometryData:
-    """Fresh collision data of `cm` with only the subset's pairs (a name, or pair indices) active, each padded as the
-    model says (see paddings)."""
-    gd = pin.GeometryData(cm.geometry)
-    gd.setActiveCollisionPairs(cm.geometry, active_table(cm, subset), True)
-    gd.setSecurityMargins(cm.geometry, pair_table(cm, cm.paddings()), True, False)
-    return gd
-
-
 def active_table(cm: CollisionModel, subset: str | np.ndarray) -> np.ndarray:
     """The pair table of a subset (a name, or pair indices) as pinocchio activates pairs."""
     active = np.zeros(len(cm.ends), dtype=bool)
@@ -341,38 +332,53 @@ def screen_of(cm: CollisionModel, subset: str) -> Screen | None:
 
 
 class CollisionChecker:
-    """Per-thread scratch data for one CollisionModel: one broad-phase manager per subset."""
+    """Per-thread scratch data for one CollisionModel: one pinocchio collision data and broad-phase manager for all its
+    subsets and paddings, switched to the ones a check asks for (a few microseconds, against milliseconds and megabytes
+    for each more collision data, which a forked worker also has to copy)."""
 
     def __init__(self, cm: CollisionModel):
         self.cm = cm
         self.model = cm.robot.model
         self.data = self.model.createData()
-        self._gdata: dict[str, pin.GeometryData] = {}
-        self._managers: dict[str, object] = {}
-        self._margins: dict[str, np.ndarray | None] = {}  # per subset: the margins table its data has (None: the model's)
+        self._gd: pin.GeometryData | None = None
+        self._manager = None
+        self._first = None  # the callback that reports the first pair hit (for screens)
+        self._tables: dict[str, tuple[Screen | None, np.ndarray]] = {}  # per subset: its screen, the pair table it checks
+        self._active: np.ndarray | None = None  # the pair table active now
+        self._margins: np.ndarray | None = None  # the margins table set now (None: the model's)
         self._own_margins: np.ndarray | None = None
-        self._screens: dict[str, Screen | None] = {}  # per subset: its screen, if it has one
-        self._first: dict[str, object] = {}  # per screened subset: the callback that reports the first pair hit
         self.checks = 0
 
-    def _subset(self, subset: str, margins: np.ndarray | None = None) -> tuple[pin.GeometryData, object]:
-        if subset not in self._managers:
+    def _subset(self, subset: str, margins: np.ndarray | None = None, exact: bool = False) -> tuple[pin.GeometryData, object]:
+        """The collision data and manager with the subset's pairs active (screened, unless `exact`) and padded by
+        `margins` (a `pair_table`; None: the model's paddings)."""
+        if subset not in self._tables:
             if subset not in self.cm.subsets:
                 raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
-            self._screens[subset] = screen = screen_of(self.cm, subset)
-            gd = geometry_data(self.cm, subset)
-            if screen is not None:
-                gd.setActiveCollisionPairs(self.cm.geometry, screen.screened, True)
-                self._first[subset] = pin.CollisionCallBackDefault(self.cm.geometry, gd, True)  # tells which pair hit
-            self._gdata[subset] = gd
-            self._managers[subset] = pin.BroadPhaseManager_NaiveCollisionManager(self.model, self.cm.geometry, gd)
-            self._margins[subset] = None
-        if self._margins[subset] is not margins:  # a few microseconds, against tens for a check
-            if margins is None and self._own_margins is None:
+            screen = screen_of(self.cm, subset)
+            self._tables[subset] = (screen, screen.screened if screen is not None else active_table(self.cm, subset))
+        screen, table = self._tables[subset]
+        if exact and screen is not None:
+            table = screen.exact
+        gm = self.cm.geometry
+        if margins is None:
+            if self._own_margins is None:
                 self._own_margins = pair_table(self.cm, self.cm.paddings())
-            self._gdata[subset].setSecurityMargins(self.cm.geometry, self._own_margins if margins is None else margins, True, False)
-            self._margins[subset] = margins
-        return self._gdata[subset], self._managers[subset]
+            margins = self._own_margins
+        if self._gd is None:
+            self._gd = pin.GeometryData(gm)
+            self._gd.setActiveCollisionPairs(gm, table, True)
+            self._gd.setSecurityMargins(gm, margins, True, False)
+            self._manager = pin.BroadPhaseManager_NaiveCollisionManager(self.model, gm, self._gd)
+            self._first = pin.CollisionCallBackDefault(gm, self._gd, True)
+            self._active, self._margins = table, margins
+        if self._active is not table:
+            self._gd.setActiveCollisionPairs(gm, table, True)
+            self._active = table
+        if self._margins is not margins:
+            self._gd.setSecurityMargins(gm, margins, True, False)
+            self._margins = margins
+        return self._gd, self._manager
 
     def in_collision(self, q: np.ndarray, subset: str = "all", placed: Mapping[int, np.ndarray] | None = None,
                      margins: np.ndarray | None = None) -> bool:
@@ -383,7 +389,7 @@ class CollisionChecker:
         first pair hit: a screening geometry holds its twin's, so the answer is the subset's own."""
         self.checks += 1
         gd, manager = self._subset(subset, margins)
-        screen = self._screens[subset]
+        screen = self._tables[subset][0]
         if placed:
             pin.updateGeometryPlacements(self.model, self.data, self.cm.geometry, gd, q)
             for index, T in placed.items():
@@ -392,38 +398,27 @@ class CollisionChecker:
         if screen is None:
             return bool(pin.computeCollisions(manager, True) if placed else
                         pin.computeCollisions(self.model, self.data, manager, q, True))
-        first = self._first[subset]
+        first = self._first
         hit = bool(pin.computeCollisions(manager, first) if placed else
                    pin.computeCollisions(self.model, self.data, manager, first, q))
         if not hit or not screen.screening[first.collisionPairIndex]:
             return hit
         # a screening pair (the object's hull, which holds its mesh) is hit first: the subset's own pairs decide
-        gm = self.cm.geometry
-        gd.setActiveCollisionPairs(gm, screen.exact, True)
-        try:
-            manager.update(False)  # the boxes are inflated by the margins of the active pairs
-            return bool(pin.computeCollisions(manager, True))
-        finally:
-            gd.setActiveCollisionPairs(gm, screen.screened, True)
+        self._subset(subset, margins, exact=True)
+        manager.update(False)  # the boxes are inflated by the margins of the active pairs
+        return bool(pin.computeCollisions(manager, True))
 
     def colliding(self, q: np.ndarray, subset: str = "all", margins: np.ndarray | None = None) -> list[int]:
         """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says
         (None: the model's paddings); `distance` then measures them."""
-        gd, _ = self._subset(subset, margins)
-        screen = self._screens[subset]
-        if screen is not None:
-            gd.setActiveCollisionPairs(self.cm.geometry, screen.exact, True)
-        try:
-            pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
-        finally:
-            if screen is not None:
-                gd.setActiveCollisionPairs(self.cm.geometry, screen.screened, True)
+        gd, _ = self._subset(subset, margins, exact=True)
+        pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
         results = gd.collisionResults
         return [int(k) for k in self.cm.subsets[subset] if results[int(k)].isCollision()]
 
-    def distance(self, pair: int, subset: str) -> float:
-        """The distance of a pair of the subset where `colliding` last placed the geometries."""
-        return float(pin.computeDistance(self.cm.geometry, self._gdata[subset], pair).min_distance)
+    def distance(self, pair: int) -> float:
+        """The distance of a pair where `colliding` last placed the geometries."""
+        return float(pin.computeDistance(self.cm.geometry, self._gd, pair).min_distance)
 
     def colliding_pairs(self, q: np.ndarray, subset: str = "all", margins: np.ndarray | None = None) -> list[tuple[str, str]]:
         """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
