@@ -317,11 +317,11 @@ class Screen:
     screening: np.ndarray  # (n_pairs,) bool: the screening pairs
 
 
-def screen_of(cm: CollisionModel, subset: str) -> Screen | None:
-    """The subset's screen, when it has pairs with a screening twin."""
+def screen_of(cm: CollisionModel, subset: str | np.ndarray) -> Screen | None:
+    """The screen of a subset (a name, or pair indices), when it has pairs with a screening twin."""
     if cm.twins is None:
         return None
-    pairs = cm.subsets[subset]
+    pairs = cm.subsets[subset] if isinstance(subset, str) else subset
     stand_in = np.full(len(cm.ends), -1)
     screening = cm.twins >= 0
     stand_in[cm.twins[screening]] = np.flatnonzero(screening)
@@ -334,30 +334,40 @@ def screen_of(cm: CollisionModel, subset: str) -> Screen | None:
 class CollisionChecker:
     """Per-thread scratch data for one CollisionModel: one pinocchio collision data and broad-phase manager for all its
     subsets and paddings, switched to the ones a check asks for (a few microseconds, against milliseconds and megabytes
-    for each more collision data, which a forked worker also has to copy)."""
+    for each more collision data, which a forked worker also has to copy). A subset is a name of the model's, or the
+    pair indices of one (of a model sharing this one's geometry and pairs: see CollisionModel.with_subsets)."""
 
-    def __init__(self, cm: CollisionModel):
+    def __init__(self, cm: CollisionModel, data: pin.Data | None = None):
+        """`data`: pinocchio scratch data to share with other checkers of this thread (each check recomputes it)."""
         self.cm = cm
         self.model = cm.robot.model
-        self.data = self.model.createData()
+        self.data = self.model.createData() if data is None else data
         self._gd: pin.GeometryData | None = None
         self._manager = None
         self._first = None  # the callback that reports the first pair hit (for screens)
-        self._tables: dict[str, tuple[Screen | None, np.ndarray]] = {}  # per subset: its screen, the pair table it checks
+        self._tables: dict[str | int, tuple[np.ndarray, Screen | None, np.ndarray]] = {}  # per subset (name, or id of its
+        # indices): its indices (kept, so the id stays theirs), its screen, the pair table it checks
         self._active: np.ndarray | None = None  # the pair table active now
         self._margins: np.ndarray | None = None  # the margins table set now (None: the model's)
         self._own_margins: np.ndarray | None = None
         self.checks = 0
 
-    def _subset(self, subset: str, margins: np.ndarray | None = None, exact: bool = False) -> tuple[pin.GeometryData, object]:
+    def _entry(self, subset: str | np.ndarray) -> tuple[np.ndarray, Screen | None, np.ndarray]:
+        """(pair indices, screen, pair table) of a subset, made once."""
+        key = subset if isinstance(subset, str) else id(subset)
+        if key not in self._tables:
+            if isinstance(subset, str) and subset not in self.cm.subsets:
+                raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
+            pairs = self.cm.subsets[subset] if isinstance(subset, str) else subset
+            screen = screen_of(self.cm, pairs)
+            self._tables[key] = (pairs, screen, screen.screened if screen is not None else active_table(self.cm, pairs))
+        return self._tables[key]
+
+    def _subset(self, subset: str | np.ndarray, margins: np.ndarray | None = None,
+                exact: bool = False) -> tuple[pin.GeometryData, object]:
         """The collision data and manager with the subset's pairs active (screened, unless `exact`) and padded by
         `margins` (a `pair_table`; None: the model's paddings)."""
-        if subset not in self._tables:
-            if subset not in self.cm.subsets:
-                raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
-            screen = screen_of(self.cm, subset)
-            self._tables[subset] = (screen, screen.screened if screen is not None else active_table(self.cm, subset))
-        screen, table = self._tables[subset]
+        _, screen, table = self._entry(subset)
         if exact and screen is not None:
             table = screen.exact
         gm = self.cm.geometry
@@ -380,7 +390,7 @@ class CollisionChecker:
             self._margins = margins
         return self._gd, self._manager
 
-    def in_collision(self, q: np.ndarray, subset: str = "all", placed: Mapping[int, np.ndarray] | None = None,
+    def in_collision(self, q: np.ndarray, subset: str | np.ndarray = "all", placed: Mapping[int, np.ndarray] | None = None,
                      margins: np.ndarray | None = None) -> bool:
         """True if any pair of the subset collides at q; `placed` (geometry index -> world pose) moves fixed geometries
         for this call, in this checker's own data: the shared model is never written; `margins` (a `pair_table` of
@@ -389,7 +399,7 @@ class CollisionChecker:
         first pair hit: a screening geometry holds its twin's, so the answer is the subset's own."""
         self.checks += 1
         gd, manager = self._subset(subset, margins)
-        screen = self._tables[subset][0]
+        screen = self._entry(subset)[1]
         if placed:
             pin.updateGeometryPlacements(self.model, self.data, self.cm.geometry, gd, q)
             for index, T in placed.items():
@@ -408,19 +418,19 @@ class CollisionChecker:
         manager.update(False)  # the boxes are inflated by the margins of the active pairs
         return bool(pin.computeCollisions(manager, True))
 
-    def colliding(self, q: np.ndarray, subset: str = "all", margins: np.ndarray | None = None) -> list[int]:
+    def colliding(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[int]:
         """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says
         (None: the model's paddings); `distance` then measures them."""
         gd, _ = self._subset(subset, margins, exact=True)
         pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
         results = gd.collisionResults
-        return [int(k) for k in self.cm.subsets[subset] if results[int(k)].isCollision()]
+        return [int(k) for k in self._entry(subset)[0] if results[int(k)].isCollision()]
 
     def distance(self, pair: int) -> float:
         """The distance of a pair where `colliding` last placed the geometries."""
         return float(pin.computeDistance(self.cm.geometry, self._gd, pair).min_distance)
 
-    def colliding_pairs(self, q: np.ndarray, subset: str = "all", margins: np.ndarray | None = None) -> list[tuple[str, str]]:
+    def colliding_pairs(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[tuple[str, str]]:
         """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
         objs, pairs = self.cm.geometry.geometryObjects, self.cm.geometry.collisionPairs
         return [(objs[pairs[k].first].name, objs[pairs[k].second].name) for k in self.colliding(q, subset, margins)]

@@ -15,8 +15,10 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ..results import frozen
 from ..roadmap.query import shortest_path
 from ..roadmap.result import Roadmap
+from .space import JointSpace
 
 UNKNOWN, VALID, INVALID = 0, 1, -1
 
@@ -29,8 +31,21 @@ class MotionGraph:
         keep = np.asarray(roadmap.edge_valid, dtype=bool)
         self.edges = np.array(roadmap.edges, dtype=np.int64)[keep].reshape(-1, 2)
         self.offline = np.ones(len(self.edges), dtype=bool)
-        self.n_roadmap = len(self.q)
+        self.n_roadmap, self.n_roadmap_edges = len(self.q), len(self.edges)
         self.index = dict(zip(map(tuple, np.sort(self.edges, axis=1).tolist()), range(len(self.edges))))  # _key of each edge
+        self._roadmap_weights: dict[bytes, np.ndarray] = {}  # per space's coordinates: the roadmap's edges' lengths
+
+    def weights(self, space: JointSpace) -> np.ndarray:
+        """Each edge's length in the space: the roadmap's edges' computed once per set of moving coordinates (and shared
+        by the copies: every transit query searches with them), the added ones' at each call."""
+        key = space.idx.tobytes()
+        if key not in self._roadmap_weights:
+            e = self.edges[: self.n_roadmap_edges]
+            reduced = space.reduce(self.q[: self.n_roadmap])
+            self._roadmap_weights[key] = frozen(np.linalg.norm(reduced[e[:, 1]] - reduced[e[:, 0]], axis=-1))
+        known = self._roadmap_weights[key]
+        added = self.edges[len(known):]
+        return np.concatenate([known, space.distance(self.q[added[:, 0]], self.q[added[:, 1]])])
 
     def copy(self) -> "MotionGraph":
         """An independent copy, cheap: the arrays are only ever replaced (never written in place), so they are shared;

@@ -42,7 +42,7 @@ from ..roadmap.local_planner import geometry_radii
 from ..task import Scene
 from .graph import MotionGraph
 from .result import PHASES
-from .situation import Situation, finger_geometries, fingertip_geometries, situation_model
+from .situation import Situation, finger_geometries, fingertip_geometries, for_motion, situation_base
 from .space import JointSpace
 from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
 from .validity import Clearances, Graded, Profile, Validity, far, fits, make_validity
@@ -105,10 +105,12 @@ class PhasePlanner:
         self.open = robot.q_rest
         self.radii = geometry_radii(cm)
         self.situation_radii: dict[tuple[int, bytes], np.ndarray] = {}  # see validity
-        self.models: dict[tuple, CollisionModel] = {}
+        self.bases: dict[Situation, CollisionModel] = {}  # one model (and collision data) per situation ...
+        self.models: dict[tuple, CollisionModel] = {}  # ... and its subsets for each kind of motion
         self.validities: dict[tuple, Validity] = {}
         self.distances: dict[int, Clearances] = {}
-        self.checkers: dict[int, CollisionChecker] = {}  # per situation model: one scratch data for all its checks
+        self.checkers: dict[int, CollisionChecker] = {}  # per situation (its geometry): one scratch data for all checks
+        # (their kinematics in self.data, which every check recomputes)
         self.checked: dict[tuple[int, bytes], np.ndarray | None] = {}  # see valid
         self.measured: dict[tuple[int, bytes], dict[int, float]] = {}  # see clearances
         self.finger_names = {arm: self.finger_of_geometry(arm) for arm in robot.spec.arm_names}
@@ -275,11 +277,12 @@ class PhasePlanner:
         return self.distances[id(model)]
 
     def checker(self, model: CollisionModel) -> CollisionChecker:
-        """The collision scratch data of a situation's model, shared by its validities and clearance meter (each pads
-        the pairs its own way): pinocchio's costs milliseconds to make, and megabytes a forked worker must copy."""
-        if id(model) not in self.checkers:
-            self.checkers[id(model)] = model.checker()
-        return self.checkers[id(model)]
+        """The collision scratch data of a situation, shared by the validities and clearance meters of all its motions
+        (each pads and picks the pairs its own way): pinocchio's costs milliseconds to make, and megabytes a forked worker
+        must copy."""
+        if id(model.geometry) not in self.checkers:
+            self.checkers[id(model.geometry)] = CollisionChecker(model, self.data)
+        return self.checkers[id(model.geometry)]
 
     def clearances(self, model: CollisionModel, q: np.ndarray) -> dict[int, float]:
         """A situation's near pairs at q and their distances (see validity.Clearances), measured once per configuration
@@ -332,7 +335,9 @@ class PhasePlanner:
                       if not np.allclose(q[self.robot.hand_idx[a]], self.open[self.robot.hand_idx[a]]))
         key = (situation, moved, np.asarray(moving).tobytes())
         if key not in self.models:
-            self.models[key] = situation_model(self.cm, self.shape, situation, moved, moving, self.hull)
+            if situation not in self.bases:
+                self.bases[situation] = situation_base(self.cm, self.shape, situation, self.hull)
+            self.models[key] = for_motion(self.bases[situation], moved, moving)
         return self.models[key]
 
     def contact(self, phase: int, part: str, path: np.ndarray, situation: Situation, hand: str | None) -> Piece:
@@ -639,6 +644,8 @@ class PhasePlanner:
         (one per core). Each job has its own random stream and its own copy of the graph, so the result does not depend
         on how many run at once. Their figures join their phases'."""
         graph, rng, seeds = self.graph, self.rng, self.rng.integers(2**63, size=len(jobs))
+        if not self.baseline:  # the roadmap's edge lengths, which every graph search weighs by: once, for every worker
+            graph.weights(JointSpace.of(self.robot.lower, self.robot.upper, self.transit_idx, self.open))
 
         def run(i: int) -> tuple[list[Piece] | tuple[int, str, str], TransitStats]:
             phase, job = jobs[i]

@@ -9,10 +9,12 @@ palm's joint (so the local planner's displacement bound covers its points too) a
 against the obstacles and every robot link but the holding hand's, whose pose relative to the
 object stays fixed while it is carried (it was checked when the grasp was made).
 
-Pairs: only those a motion can change (whose relative pose depends on a moving joint), subset
-'moving'; of them, 'object' (robot–object pairs, padded by the model's object padding), the
-object–obstacle pairs in 'env', and 'changed' what the offline roadmap did not check: the object's
-pairs and every pair of a hand whose fingers are not at the roadmap's hold configuration.
+Pairs: a situation's model (`situation_base`) keeps those some joint moves; 'object' (robot–object
+pairs, padded by the model's object padding), the object–obstacle pairs in 'env'. For each kind of
+motion, `for_motion` names the pairs it can change (whose relative pose depends on a moving joint),
+subset 'moving', and of them 'changed', what the offline roadmap did not check: the object's pairs and
+every pair of a hand whose fingers are not at the roadmap's hold configuration. All the motions of a
+situation share its geometry, so one collision data serves them (see CollisionChecker).
 """
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ from ..collision import CollisionModel, joint_support
 from ..geometry import se3
 
 OBJECT = "object"
+OBJECT_PAIRS = "object mesh"  # the subset of every pair of the object's mesh (with the robot and the obstacles)
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,6 +75,27 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
     'moving' and 'changed' keep only the pairs whose relative pose the configuration indices `moving` change. With
     `hull` (the object's convex hull), every pair of the object has a screening twin with the hull, in no subset: a
     check tries the hull first, and the mesh only where the hull is hit (see CollisionChecker.in_collision)."""
+    return for_motion(situation_base(cm, shape, situation, hull), moved_hands, moving)
+
+
+def for_motion(base: CollisionModel, moved_hands: tuple[str, ...], moving: np.ndarray) -> CollisionModel:
+    """A situation's model (see situation_base) for motions of the configuration indices `moving`, the hands
+    `moved_hands` away from the roadmap's hold configuration: 'moving' the pairs whose relative pose they change, 'changed'
+    those of them the offline roadmap did not check (see the module). The geometry is the base's, so one collision data
+    serves all of a situation's motions (see CollisionChecker)."""
+    stands_in = base.twins >= 0 if base.twins is not None else np.zeros(len(base.ends), dtype=bool)
+    changes = base.relative_joints()[:, moving].any(axis=1) & ~stands_in
+    moved = np.concatenate([finger_geometries(base, arm) for arm in moved_hands] + [np.zeros(0, np.int64)])
+    changed = np.isin(base.ends, moved).any(axis=1)
+    changed[base.subsets[OBJECT_PAIRS]] = True
+    return base.with_subsets({"moving": np.flatnonzero(changes), "changed": np.flatnonzero(changes & changed)})
+
+
+def situation_base(cm: CollisionModel, shape: coal.CollisionGeometry, situation: Situation,
+                   hull: coal.CollisionGeometry | None = None) -> CollisionModel:
+    """A copy of `cm` with the object in `situation` (and its hull screening it: see situation_model), keeping only the
+    pairs some joint moves relative to each other; subsets 'object' (robot–object pairs) and OBJECT_PAIRS (every pair of
+    the object's own mesh), the obstacle pairs in 'env'."""
     robot = cm.robot
     gm = cm.geometry.copy()
     objs = gm.geometryObjects
@@ -99,13 +123,11 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
             gm.addCollisionPair(pin.CollisionPair(g, o + body))
     new_env = np.arange(n_pairs, n_pairs + len(env_partners))
     new_robot = np.arange(n_pairs + len(env_partners), n_pairs + len(partners))
-    moved = np.concatenate([finger_geometries(cm, arm) for arm in moved_hands] + [np.zeros(0, np.int64)])
-    hand_pairs = np.flatnonzero(np.isin(cm.ends, moved).any(axis=1))
     new = np.arange(n_pairs, n_pairs + len(partners))
     subsets = {**cm.subsets,
                "all": np.concatenate([cm.subsets["all"], new]),
                "env": np.concatenate([cm.subsets["env"], new_env]),
-               "object": new_robot}
+               "object": new_robot, OBJECT_PAIRS: new}
     ends = np.concatenate([cm.ends] + [np.array([(g, o + body) for g in partners], np.int64).reshape(-1, 2)
                                        for body in range(len(bodies))])
     twins = None
@@ -115,17 +137,13 @@ def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation
     support = np.concatenate([cm.support, joint_support(robot.model, [parent] * len(bodies))])
     support.setflags(write=False)  # the model is shared read-only
     out = dataclasses.replace(cm, geometry=gm, subsets=subsets, ends=ends, support=support, twins=twins)
-    changes = out.relative_joints()[:, moving].any(axis=1)
-    changed = np.concatenate([hand_pairs, new])
-    return _moving_only(out, changes, changed[changes[changed]])
+    return _moving_only(out, out.relative_joints().any(axis=1))
 
 
-def _moving_only(cm: CollisionModel, keep: np.ndarray, changed: np.ndarray) -> CollisionModel:
-    """`cm` with the pairs `keep` (a flag per pair) alone in its geometry model (changed in place: situation_model's own
-    copy), ordered as pinocchio orders them (by their two geometry indices), its subsets renumbered, 'moving' all of them
-    but screening pairs and 'changed' the pairs `changed` (indices before): a motion checks no other pair, and
-    pinocchio's collision data of a model costs about 5 kB per pair (12 MB for the whole robot's), to allocate and to
-    free, every time a validity is made."""
+def _moving_only(cm: CollisionModel, keep: np.ndarray) -> CollisionModel:
+    """`cm` with the pairs `keep` (a flag per pair) alone in its geometry model (changed in place: situation_base's own
+    copy), ordered as pinocchio orders them (by their two geometry indices), its subsets renumbered: no motion checks
+    another pair, and pinocchio's collision data of a model costs about 5 kB per pair to allocate and to free."""
     ends = np.sort(cm.ends[keep], axis=1)
     order = np.lexsort((ends[:, 1], ends[:, 0]))
     ends = ends[order]
@@ -141,7 +159,5 @@ def _moving_only(cm: CollisionModel, keep: np.ndarray, changed: np.ndarray) -> C
         twins = np.full(len(ends), -1, dtype=np.int64)
         screening = np.flatnonzero((cm.twins >= 0) & keep)
         twins[renumber[screening]] = renumber[cm.twins[screening]]
-    subsets["moving"] = np.flatnonzero(twins < 0) if twins is not None else np.arange(len(ends))
-    subsets["changed"] = np.sort(renumber[changed])
     ends.setflags(write=False)
     return dataclasses.replace(cm, subsets=subsets, ends=ends, twins=twins)

@@ -98,8 +98,7 @@ class LazyTransit:
         return self.space.full(self.space.reduce(self.graph.q[node]))
 
     def _weights(self) -> np.ndarray:
-        e = self.graph.edges
-        return self.space.distance(self.graph.q[e[:, 0]], self.graph.q[e[:, 1]])
+        return self.graph.weights(self.space)
 
     def _connect(self, node: int) -> int:
         """Join a query end to its nearest valid graph nodes, nearest first: by checked edges until one is valid (an end

@@ -181,7 +181,7 @@ class Clearances:
 
     def __call__(self, q: np.ndarray) -> dict[int, float]:
         """pair -> distance, for the subset's pairs nearer than `far` of their kind at q."""
-        return {k: self.checker.distance(k) for k in self.checker.colliding(q, self.subset, self.margins)}
+        return {k: self.checker.distance(k) for k in self.checker.colliding(q, self.cm.subsets[self.subset], self.margins)}
 
     def by_kind(self, near: dict[int, float]) -> dict[str, float]:
         """The smallest distance of each kind among measured pairs (inf for a kind none of them is)."""

@@ -108,7 +108,7 @@ class SegmentChecker:
         if coarse < 1:
             raise ValueError(f"the coarse factor must be a whole number >= 1, got {coarse}")
         if checker is not None and (checker.cm.geometry is not cm.geometry or checker.cm.ends is not cm.ends):
-            raise ValueError("a shared collision checker must be of the same geometry model and pairs")
+            raise ValueError("a shared collision checker must be of the same geometry model and pairs")  # subsets may differ
         self.cm = cm
         self.checker = checker or cm.checker()
         self.checks = 0
@@ -124,11 +124,11 @@ class SegmentChecker:
     def in_collision(self, q: np.ndarray, subset: str, coarse: bool = False) -> bool:
         """One check of q over a subset, at the paddings (or the coarse ones)."""
         self.checks += 1
-        return self.checker.in_collision(q, subset, margins=self._coarse_margins if coarse else self._margins)
+        return self.checker.in_collision(q, self.cm.subsets[subset], margins=self._coarse_margins if coarse else self._margins)
 
     def colliding_pairs(self, q: np.ndarray, subset: str) -> list[tuple[str, str]]:
         """The subset's pairs colliding at q at the paddings, by geometry name (for messages)."""
-        return self.checker.colliding_pairs(q, subset, self._margins)
+        return self.checker.colliding_pairs(q, self.cm.subsets[subset], self._margins)
 
     def weights(self, subset: str) -> np.ndarray:
         """(rows, nq) the subset's displacement weights per joint (computed once per subset)."""
