@@ -345,6 +345,7 @@ class CollisionChecker:
         self._gd: pin.GeometryData | None = None
         self._manager = None
         self._first = None  # the callback that reports the first pair hit (for screens)
+        self._collect = None  # the callback that lists the pairs the broad phase finds (see overlapping)
         self._tables: dict[str | int, tuple[np.ndarray, Screen | None, np.ndarray]] = {}  # per subset (name, or id of its
         # indices): its indices (kept, so the id stays theirs), its screen, the pair table it checks
         self._active: np.ndarray | None = None  # the pair table active now
@@ -426,8 +427,17 @@ class CollisionChecker:
         results = gd.collisionResults
         return [int(k) for k in self._entry(subset)[0] if results[int(k)].isCollision()]
 
+    def overlapping(self, q: np.ndarray, subset: str | np.ndarray, margins: np.ndarray) -> list[int]:
+        """The pairs of the subset whose bounding boxes, each grown by half its largest margin in `margins`, overlap at q
+        (the broad phase alone, no screen): every pair nearer than its margin is among them."""
+        _, manager = self._subset(subset, margins, exact=True)
+        if self._collect is None:
+            self._collect = pin.CollisionCallBackCollect(self.cm.geometry, self._gd)
+        pin.computeCollisions(self.model, self.data, manager, self._collect, q)
+        return [int(k) for k in self._collect.pair_indexes]
+
     def distance(self, pair: int) -> float:
-        """The distance of a pair where `colliding` last placed the geometries."""
+        """The distance of a pair where the last check placed the geometries."""
         return float(pin.computeDistance(self.cm.geometry, self._gd, pair).min_distance)
 
     def colliding_pairs(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[tuple[str, str]]:

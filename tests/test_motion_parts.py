@@ -538,6 +538,43 @@ def test_paddings_fitted_pair_by_pair():
     assert moves.any() and not moves.all(), "the segments must include both cases"
 
 
+def test_clearances_measure_exactly_the_pairs_nearer_than_far():
+    """The clearance meter (the broad phase with `far` as margins, then exact distances) measures exactly the pairs that
+    an exhaustive distance query puts nearer than `far` of their kind, at their distances: random configurations around
+    the rest pose, the statuette static on the desk and screened by its hull."""
+    import pinocchio as pin
+
+    from planner.collision import build_collision_model
+    from planner.geometry import coal_convex, coal_mesh
+    from planner.motion.situation import Situation, situation_model
+    from planner.motion.validity import Clearances, far, transit_profile
+    from planner.task import find_task, load_task
+
+    scene = load_task(find_task("default"))
+    robot = scene.robot
+    mesh = scene.object_mesh
+    model = situation_model(build_collision_model(robot, scene.environment), coal_mesh(mesh), Situation(None, scene.object_initial),
+                            (), np.arange(robot.nq), coal_convex(mesh.convex_hull))
+    limits = far(transit_profile({"env_clearance_m": 0.01, "self_clearance_m": 0.0}, 0.03, 0.015))
+    meter = Clearances(model, "moving", limits)
+    gm, data = model.geometry, robot.model.createData()
+    gd = pin.GeometryData(gm)  # the oracle: every pair's distance from a fresh geometry data, no margin, no broad phase
+    kind = {int(k): "env" for k in model.subsets["env"]} | {int(k): "object" for k in model.subsets["object"]}
+    rng = np.random.default_rng(5)
+    measured = 0
+    for _ in range(30):
+        q = np.clip(robot.q_rest + rng.normal(0.0, 0.4, robot.nq), robot.lower, robot.upper)
+        near = meter(q)
+        pin.updateGeometryPlacements(robot.model, data, gm, gd, q)
+        exact = {int(k): pin.computeDistance(gm, gd, int(k)).min_distance for k in model.subsets["moving"]}
+        expected = {k for k, d in exact.items() if d < limits[kind.get(k, "self")]}
+        borderline = {k for k, d in exact.items() if abs(d - limits[kind.get(k, "self")]) < 1e-6}
+        assert set(near) ^ expected <= borderline, sorted(set(near) ^ expected)
+        assert all(abs(near[k] - exact[k]) < 1e-6 for k in near)
+        measured += len(near)
+    assert measured > 100, "the configurations must bring many pairs near"
+
+
 @pytest.mark.parametrize("baseline", [False, True], ids=["roadmap", "rrt"])
 def test_transit_checks_count_every_collision_check_of_the_transit(example, monkeypatch, baseline):
     """Table I's transit checks are every collision check a transit makes, counted apart from the planner's own tally:

@@ -166,8 +166,8 @@ class Clearances:
     see `far`), by pair, and the smallest per kind: with an obstacle ('env'), robot–object pairs ('object') and
     robot–robot pairs ('self'). `checker`: the model's collision scratch data, shared with its validities.
 
-    Only pairs nearer than `far` are measured: a collision check with `far` as the security margin finds them (GJK stops
-    early on pairs far apart), then their exact distances are computed; measuring every pair cost ten times more."""
+    Only pairs nearer than `far` are measured: the broad phase with `far` as the margins finds the candidates, whose
+    exact distances are computed; measuring every pair cost ten times more, testing every pair at the margin first twice."""
 
     def __init__(self, cm: CollisionModel, subset: str, far: dict[str, float], checker: CollisionChecker | None = None):
         self.cm, self.subset = cm, subset
@@ -177,11 +177,17 @@ class Clearances:
         kind[cm.subsets.get("object", [])] = "object"
         self.kind = kind  # of every pair of the model
         margins = dataclasses.replace(cm.params, **{f"{k}_padding": far[k] for k in KINDS})
-        self.margins = pair_table(cm, dataclasses.replace(cm, params=margins, pair_padding=()).paddings())
+        self.far = dataclasses.replace(cm, params=margins, pair_padding=()).paddings()  # per pair
+        self.margins = pair_table(cm, self.far)
 
     def __call__(self, q: np.ndarray) -> dict[int, float]:
         """pair -> distance, for the subset's pairs nearer than `far` of their kind at q."""
-        return {k: self.checker.distance(k) for k in self.checker.colliding(q, self.cm.subsets[self.subset], self.margins)}
+        near = {}
+        for k in self.checker.overlapping(q, self.cm.subsets[self.subset], self.margins):
+            d = self.checker.distance(k)
+            if d < self.far[k]:
+                near[k] = d
+        return near
 
     def by_kind(self, near: dict[int, float]) -> dict[str, float]:
         """The smallest distance of each kind among measured pairs (inf for a kind none of them is)."""
