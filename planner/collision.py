@@ -351,6 +351,7 @@ class CollisionChecker:
         self._active: np.ndarray | None = None  # the pair table active now
         self._margins: np.ndarray | None = None  # the margins table set now (None: the model's)
         self._own_margins: np.ndarray | None = None
+        self._last: tuple | None = None  # (subset, margins, screen) of the last check, while its setting is active
         self.checks = 0
 
     def _entry(self, subset: str | np.ndarray) -> tuple[np.ndarray, Screen | None, np.ndarray]:
@@ -399,8 +400,13 @@ class CollisionChecker:
         `CollisionModel.twins`) is checked with them in place of their twins, and as itself only when one of them is the
         first pair hit: a screening geometry holds its twin's, so the answer is the subset's own."""
         self.checks += 1
-        gd, manager = self._subset(subset, margins)
-        screen = self._entry(subset)[1]
+        if self._last is not None and self._last[0] is subset and self._last[1] is margins:  # as the check before
+            screen = self._last[2]
+            gd, manager = self._gd, self._manager
+        else:
+            gd, manager = self._subset(subset, margins)
+            screen = self._entry(subset)[1]
+            self._last = (subset, margins, screen)
         if placed:
             pin.updateGeometryPlacements(self.model, self.data, self.cm.geometry, gd, q)
             for index, T in placed.items():
@@ -415,6 +421,7 @@ class CollisionChecker:
         if not hit or not screen.screening[first.collisionPairIndex]:
             return hit
         # a screening pair (the object's hull, which holds its mesh) is hit first: the subset's own pairs decide
+        self._last = None
         self._subset(subset, margins, exact=True)
         manager.update(False)  # the boxes are inflated by the margins of the active pairs
         return bool(pin.computeCollisions(manager, True))
@@ -422,6 +429,7 @@ class CollisionChecker:
     def colliding(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[int]:
         """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says
         (None: the model's paddings); `distance` then measures them."""
+        self._last = None
         gd, _ = self._subset(subset, margins, exact=True)
         pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
         results = gd.collisionResults
@@ -430,6 +438,7 @@ class CollisionChecker:
     def overlapping(self, q: np.ndarray, subset: str | np.ndarray, margins: np.ndarray) -> list[int]:
         """The pairs of the subset whose bounding boxes, each grown by half its largest margin in `margins`, overlap at q
         (the broad phase alone, no screen): every pair nearer than its margin is among them."""
+        self._last = None
         _, manager = self._subset(subset, margins, exact=True)
         if self._collect is None:
             self._collect = pin.CollisionCallBackCollect(self.cm.geometry, self._gd)
