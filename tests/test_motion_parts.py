@@ -119,6 +119,60 @@ def test_shortcuts_gaining_too_little_are_not_checked():
         assert np.linalg.norm(np.diff(path, axis=0), axis=1).sum() < 2.0
 
 
+def test_vertex_shortcuts_jump_to_the_farthest_reachable_vertex_and_check_each_kept_motion_once():
+    """A zigzag around a wall: the greedy pass jumps from each vertex to the farthest one a valid straight motion
+    reaches; here that keeps as few vertices as a breadth-first search over all chains of valid jumps (the oracle, which
+    shares no code). Every kept motion is valid and checked once, near the ends (from the first vertex, to the last) by
+    the `near` validity. A nearly straight stretch is taken as it is, unchecked."""
+    from planner.motion.transit import shortcut_vertices
+
+    wall = (np.array([2.0, -1.0]), np.array([2.0, 0.5]))  # a segment no motion may cross
+
+    def crosses(qa, qb):
+        (p, r), d = wall, qb - qa
+        den = d[0] * (r - p)[1] - d[1] * (r - p)[0]
+        if abs(den) < 1e-12:
+            return False
+        t = ((p - qa)[0] * (r - p)[1] - (p - qa)[1] * (r - p)[0]) / den
+        u = ((p - qa)[0] * d[1] - (p - qa)[1] * d[0]) / den
+        return 0.0 <= t <= 1.0 and 0.0 <= u <= 1.0
+
+    class Rule:
+        def __init__(self):
+            self.calls = []
+
+        def state_valid(self, q):
+            return True
+
+        def motion_valid(self, qa, qb, ends=True):
+            self.calls.append((tuple(qa), tuple(qb)))
+            return not crosses(qa, qb)
+
+    path = np.array([[0, 0], [1, -0.5], [1.5, 1], [2, 1.2], [2.5, 1], [3, -0.5], [4, 0], [5, 0.5], [6, 0]], dtype=float)
+    full, near = Rule(), Rule()
+    out = shortcut_vertices(path, full, near)
+    # the oracle: fewest vertices over chains of valid jumps, breadth first
+    n, best, frontier = len(path), {0: [0]}, [0]
+    while n - 1 not in best:
+        reached = []
+        for i in frontier:
+            for j in range(i + 1, n):
+                if j not in best and not crosses(path[i], path[j]):
+                    best[j] = best[i] + [j]
+                    reached.append(j)
+        frontier = reached
+    assert len(out) == len(best[n - 1]) < len(path), (out, path[best[n - 1]])
+    assert not any(crosses(a, b) for a, b in zip(out[:-1], out[1:]))
+    kept = [(tuple(a), tuple(b)) for a, b in zip(out[:-1], out[1:])]
+    calls = full.calls + near.calls
+    assert all(calls.count(k) == 1 for k in kept), "each kept motion checked once"
+    assert all(a == tuple(path[0]) or b == tuple(path[-1]) for a, b in near.calls)
+    assert all(a != tuple(path[0]) and b != tuple(path[-1]) for a, b in full.calls)
+    straight = np.array([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [3.0, 0.01]])
+    rule = Rule()
+    assert np.array_equal(shortcut_vertices(straight, rule, rule, min_gain=0.1), straight) and rule.calls == []
+
+
 def _phase_planner(scene, roadmap, baseline: bool = False):
     """The phase planner of a scene on the roadmap, with the default parameters and seed 0."""
     from planner.collision import build_collision_model

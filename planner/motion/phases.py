@@ -44,7 +44,7 @@ from .graph import MotionGraph
 from .result import PHASES
 from .situation import Situation, finger_geometries, fingertip_geometries, for_motion, situation_base
 from .space import JointSpace
-from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut
+from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut, shortcut_vertices
 from .validity import Clearances, Graded, Profile, Validity, far, fits, make_validity
 
 
@@ -502,7 +502,8 @@ class PhasePlanner:
         except TransitFailed as exc:
             raise PieceFailed(phase, part, str(exc)) from exc
         t = time.perf_counter()
-        path = shortcut(path, full, near, self.rng, self.transit_params.shortcut_attempts, self.transit_params.shortcut_min_gain)
+        gain = self.transit_params.shortcut_min_gain
+        path = shortcut(shortcut_vertices(path, full, near, gain), full, near, self.rng, self.transit_params.shortcut_attempts, gain)
         stats.seconds_shortcut += time.perf_counter() - t
         return Piece(phase, part, path, situation)
 

@@ -251,6 +251,30 @@ def rrt_transit(space: JointSpace, full: MotionValidity, near: MotionValidity, q
     return found
 
 
+def shortcut_vertices(path: np.ndarray, full: MotionValidity, near: MotionValidity, min_gain: float = 0.0) -> np.ndarray:
+    """Greedy shortcuts between vertices: from the first vertex, a straight motion to the farthest later vertex it can
+    reach validly (checked with `near` from the first or to the last vertex: close to the ends), then on from there. Each
+    motion kept is checked once (random shortcuts check many that a later one replaces) and the path keeps few vertices,
+    each a stop of the rest-to-rest timing. A jump that would shorten the path by less than `min_gain` is taken along the
+    path itself, unchecked (the gain only grows with the vertex jumped to: no nearer one gains more)."""
+    path = np.asarray(path, dtype=float)
+    n = len(path)
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    out, i = [path[0]], 0
+    while i < n - 1:
+        j = n - 1
+        while j > i + 1:
+            if cum[j] - cum[i] - float(np.linalg.norm(path[j] - path[i])) < min_gain:
+                out.extend(path[i + 1: j])  # nearly straight already
+                break
+            if (near if i == 0 or j == n - 1 else full).motion_valid(path[i], path[j]):
+                break
+            j -= 1
+        out.append(path[j])
+        i = j
+    return _drop_duplicates(np.array(out))
+
+
 def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: np.random.Generator, attempts: int,
              min_gain: float = 0.0) -> np.ndarray:
     """Random shortcuts between two points of the polyline (by arc length), kept when the two points and the straight
