@@ -40,12 +40,11 @@ class MotionGraph:
         by the copies: every transit query searches with them), the added ones' at each call."""
         key = space.idx.tobytes()
         if key not in self._roadmap_weights:
-            e = self.edges[: self.n_roadmap_edges]
-            reduced = space.reduce(self.q[: self.n_roadmap])
-            self._roadmap_weights[key] = frozen(np.linalg.norm(reduced[e[:, 1]] - reduced[e[:, 0]], axis=-1))
-        known = self._roadmap_weights[key]
-        added = self.edges[len(known):]
-        return np.concatenate([known, space.distance(self.q[added[:, 0]], self.q[added[:, 1]])])
+            self._roadmap_weights[key] = frozen(self._lengths(space, self.edges[: self.n_roadmap_edges]))
+        return np.concatenate([self._roadmap_weights[key], self._lengths(space, self.edges[self.n_roadmap_edges:])])
+
+    def _lengths(self, space: JointSpace, edges: np.ndarray) -> np.ndarray:
+        return space.distance(self.q[edges[:, 0]], self.q[edges[:, 1]])
 
     def copy(self) -> "MotionGraph":
         """An independent copy, cheap: the arrays are only ever replaced (never written in place), so they are shared;

@@ -112,14 +112,15 @@ class SegmentChecker:
         self.cm = cm
         self.checker = checker or cm.checker()
         self.checks = 0
-        self._margins = pair_table(cm, cm.paddings())
+        paddings = cm.paddings()
+        self._margins = pair_table(cm, paddings)
         radii = geometry_radii(cm) if radii is None else radii
         sweep = cm.relative_joints() * (radii[cm.ends[:, 0]] + radii[cm.ends[:, 1]])
         allow = allowances(cm, env_clearance, self_clearance, object_clearance)
         self._per_pair = sweep / (2.0 * allow)[:, None]
         self._weights: dict[str, np.ndarray] = {}
         self.coarse = int(coarse)
-        self._coarse_margins = pair_table(cm, cm.paddings() + (self.coarse - 1) * allow) if coarse > 1 else None
+        self._coarse_margins = pair_table(cm, paddings + (self.coarse - 1) * allow) if coarse > 1 else None
 
     def in_collision(self, q: np.ndarray, subset: str, coarse: bool = False) -> bool:
         """One check of q over a subset, at the paddings (or the coarse ones)."""
