@@ -10,6 +10,11 @@ forked together, those signals held until every one is in the pool's map), and
 `stop_pools(thread)` kills the live pools a thread made (the workbench's background run, when it shuts down)
 and refuses it any new one (`Stopped`): at exit CPython waits for every pool's jobs, so a pool started
 after the kill, between two of a step's pools, kept a stopped workbench alive for minutes.
+
+Pools nest: a job on a worker may make a pool of its own. A forked child re-creates the module's locks and tables
+(`os.register_at_fork`), so it never waits on a lock its parent held while forking it, and the jobs of `forked_map`
+reach its workers through their initializer, not a table of the parent's. How many processes a pool may fork is bounded
+by `cpu_budget` (a suite's executor gives each task the CPUs it was given): `available_cpus()`.
 """
 from __future__ import annotations
 
@@ -28,11 +33,51 @@ from typing import Any
 
 PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 
-_JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
+_JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None  # in a forked_map worker only: its jobs (set by its initializer)
+_BUDGET: int | None = None  # CPUs this process may use (cpu_budget); None: every CPU it is allowed to run on
 _LIVE: dict[concurrent.futures.ProcessPoolExecutor, threading.Thread] = {}  # live pools, by the thread that made them
 _STOPPED: weakref.WeakSet[threading.Thread] = weakref.WeakSet()  # threads stop_pools was called for: no new pool
 _LIVE_LOCK = threading.Lock()  # guards _LIVE and _STOPPED
 _SPAWN_LOCK = threading.Lock()  # held while a pool forks its workers
+
+
+def _reset_in_child() -> None:
+    """In a freshly forked child: new locks (the parent may have held one while forking) and no pools of the parent's."""
+    global _LIVE_LOCK, _SPAWN_LOCK, _LIVE, _STOPPED
+    _LIVE_LOCK, _SPAWN_LOCK = threading.Lock(), threading.Lock()
+    _LIVE, _STOPPED = {}, weakref.WeakSet()
+
+
+os.register_at_fork(after_in_child=_reset_in_child)
+
+
+def available_cpus() -> int:
+    """How many processes this process's pools may run at once: its `cpu_budget`, else the CPUs it may run on."""
+    return _BUDGET or max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+
+
+@contextlib.contextmanager
+def cpu_budget(cpus: int) -> Iterator[None]:
+    """Inside: this process's pools use at most `cpus` processes (one runs inline), so that a suite task stays on the
+    CPUs its executor gave it."""
+    global _BUDGET
+    previous, _BUDGET = _BUDGET, max(1, cpus)
+    try:
+        yield
+    finally:
+        _BUDGET = previous
+
+
+class _Inline(concurrent.futures.Executor):
+    """An executor that runs each job at once in this process (a pool of one CPU: no process to fork)."""
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> concurrent.futures.Future:
+        future: concurrent.futures.Future = concurrent.futures.Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except Exception as exc:
+            future.set_exception(exc)
+        return future
 
 
 class Terminated(KeyboardInterrupt):
@@ -134,6 +179,7 @@ def worker_pool(workers: int, initializer: Callable[..., None] | None = None, in
                 ) -> Iterator[concurrent.futures.ProcessPoolExecutor]:
     """A pool of `workers` forked processes that die with their parent; on an exception its workers are killed, not awaited;
     `Stopped` in a thread `stop_pools` was called for."""
+    workers = max(1, min(workers, _BUDGET or workers))
     pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_child_init,
                                                   initargs=(os.getpid(), initializer, initargs))
     with _LIVE_LOCK:
@@ -154,6 +200,25 @@ def worker_pool(workers: int, initializer: Callable[..., None] | None = None, in
             _LIVE.pop(pool, None)
 
 
+@contextlib.contextmanager
+def executor(workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()
+             ) -> Iterator[concurrent.futures.Executor]:
+    """`worker_pool(workers, ...)`, or jobs run inline (after `initializer`) when only one CPU is to be used."""
+    workers = min(workers, available_cpus())
+    if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+        with worker_pool(workers, initializer, initargs) as pool:
+            yield pool
+        return
+    if initializer is not None:
+        initializer(*initargs)
+    yield _Inline()
+
+
+def _set_jobs(fn: Callable[[Any], Any], jobs: Sequence[Any]) -> None:
+    global _JOBS
+    _JOBS = (fn, jobs)
+
+
 def _run(i: int) -> Any:
     assert _JOBS is not None
     fn, jobs = _JOBS
@@ -162,18 +227,13 @@ def _run(i: int) -> Any:
 
 def forked_map(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int | None = None,
                on_result: Callable[[Any], None] | None = None) -> list[Any]:
-    """[fn(job) for job in jobs], in order, over up to `workers` forked processes (default: the CPU count);
+    """[fn(job) for job in jobs], in order, over up to `workers` forked processes (default and cap: `available_cpus()`);
     `on_result` sees each result as it arrives, in order (for progress reports)."""
-    global _JOBS
-    workers = min(len(jobs), workers or os.cpu_count() or 1)
+    workers = min(len(jobs), workers or available_cpus(), available_cpus())
     if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():
         return _collect(map(fn, jobs), on_result)
-    _JOBS = (fn, jobs)
-    try:
-        with worker_pool(workers) as pool:
-            return _collect(pool.map(_run, range(len(jobs))), on_result)
-    finally:
-        _JOBS = None
+    with worker_pool(workers, _set_jobs, (fn, jobs)) as pool:  # forked: fn and jobs are inherited, never pickled
+        return _collect(pool.map(_run, range(len(jobs))), on_result)
 
 
 def _collect(results: Iterator[Any], on_result: Callable[[Any], None] | None) -> list[Any]:

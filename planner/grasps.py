@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -22,7 +21,7 @@ from scipy.spatial.transform import Rotation
 from .collision import CollisionParams
 from .errors import RegraspError
 from .finger_workspace import FingerWorkspace, WorkspaceParams, hand_workspaces
-from .forked import forked_map
+from .forked import available_cpus, forked_map
 from .grasp_frames import box_grid, hopf_rotations
 from .grasp_search import OUTCOMES, FrameGrasp, GraspSearch, SearchParams
 from .hand_model import HandModel, load_hand_model
@@ -204,7 +203,7 @@ def _deduplicated(order: np.ndarray, points: np.ndarray, mask: np.ndarray, dista
 def compute_grasp_list(spec: HandSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams, seed: int,
                        progress: Progress = no_progress, workers: int | None = None) -> GraspList:
     """Compute one hand's ranked grasp list on a mesh (no cache)."""
-    workers = min(2, os.cpu_count() or 1) if workers is None else workers
+    workers = min(2, available_cpus()) if workers is None else workers
     hand = load_hand_model(spec)
     progress(0.0, "object point set and finger workspaces")
     obj = _object(mesh, hand, p)

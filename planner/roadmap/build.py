@@ -6,15 +6,14 @@ in order, so the roadmap depends on the seed only, never on the number of worker
 """
 from __future__ import annotations
 
-import os
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor
 
 import numpy as np
 import pinocchio as pin
 
 from ..collision import CollisionModel, CollisionParams, build_collision_model
-from ..forked import worker_pool
+from ..forked import available_cpus, executor
 from ..robot import Robot
 from ..steps import Progress, no_progress
 from ..task import Scene
@@ -74,11 +73,7 @@ def _vis_prm_job(dec: Decomposition, arm: str, seed: int, params: RoadmapParams)
     return elem, seg.checks - before
 
 
-def _workers() -> int:
-    return max(1, min(len(os.sched_getaffinity(0)), os.cpu_count() or 1))
-
-
-def _check_all(pool: ProcessPoolExecutor, qa: np.ndarray, qb: np.ndarray, subsets: list[str], workers: int,
+def _check_all(pool: Executor, qa: np.ndarray, qb: np.ndarray, subsets: list[str], workers: int,
                progress: Progress, message: str) -> tuple[np.ndarray, int]:
     """Check segments qa[i] -> qb[i] (a configuration when qa[i] == qb[i]) in ordered chunks."""
     if not len(qa):
@@ -98,8 +93,8 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
     arms = dec.arms
     seeds = np.random.SeedSequence(seed).generate_state(len(arms), dtype=np.uint64)
     timings, checks = {}, {}
-    workers = _workers()
-    with worker_pool(workers, _init_worker, (cm, params)) as pool:
+    workers = available_cpus()
+    with executor(workers, _init_worker, (cm, params)) as pool:
         t = time.perf_counter()
         progress(0.0, "elementary roadmaps (Vis-PRM)")
         jobs = [pool.submit(_vis_prm_job, dec, arm, int(s), params) for arm, s in zip(arms, seeds)]

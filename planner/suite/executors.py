@@ -15,7 +15,7 @@ OnResult = Callable[[JobResult], None]
 
 @dataclass(frozen=True)
 class LocalExecutor:
-    """Jobs on `workers` forked processes of this machine."""
+    """Jobs on `workers` forked processes of this machine (each job's own pools stay within its `cpus`)."""
 
     workers: int
 
@@ -32,7 +32,7 @@ class LocalExecutor:
 
 @dataclass(frozen=True)
 class RayExecutor:
-    """Jobs as Ray tasks (one CPU each): on the cluster at `address`, or on a local Ray started here when it is empty.
+    """Jobs as Ray tasks (each asking for its job's CPUs): on the cluster at `address`, or on a local Ray started here when it is empty.
 
     A Ray already initialised in this process (e.g. by a test, with its own resources) is used as it is."""
 
@@ -57,8 +57,8 @@ class RayExecutor:
                 raise RegraspError(f"cannot reach the Ray cluster at {self.address}: {exc}") from exc
         try:
             on_slots(max(1, int(ray.cluster_resources().get("CPU", 1))))
-            remote = ray.remote(num_cpus=1)(run_job)
-            pending = [remote.remote(job) for job in jobs]
+            remote = ray.remote(run_job)
+            pending = [remote.options(num_cpus=job.cpus).remote(job) for job in jobs]
             while pending:
                 done, pending = ray.wait(pending, num_returns=1)
                 for ref in done:

@@ -5,14 +5,19 @@ and the session's files: nothing is shared but the user cache, where the grasp l
 """
 from __future__ import annotations
 
+import contextlib
+import signal
 import tempfile
+import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ..errors import RegraspError
+from ..forked import cpu_budget
 from ..paths import file_in
-from ..pipeline import step_named, steps_until
+from ..pipeline import PIPELINE, step_named, steps_until
 from ..results import atomic_write_bytes, writing
 from ..runner import run_pipeline
 from ..session import MANIFEST, Session, cached_spec_file
@@ -22,17 +27,42 @@ from ..tomlread import load_toml
 
 CHECK = "check"  # the failing "step" of a task rejected before any step runs
 ERROR = "error"  # the failing "step" of a task on which the planner raised an unexpected exception
+TIMEOUT = "timeout"  # the failing stage of a task that ran past its suite's task_timeout
+
+
+class TaskTimeout(BaseException):
+    """A task ran past its limit (a BaseException: no `except Exception` of the planner's swallows it)."""
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float) -> Iterator[None]:
+    """Inside: `TaskTimeout` is raised in this (main) thread after `seconds` (SIGALRM; forked workers inherit no timer)."""
+    if threading.current_thread() is not threading.main_thread():
+        raise RegraspError("a suite task runs in the main thread of its worker (its time limit is a SIGALRM)")
+
+    def expired(signum: int, frame: object) -> None:
+        raise TaskTimeout()
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 @dataclass(frozen=True)
 class TaskJob:
-    """What a worker needs to run one task: its files by name (the task file first), the session seed, the last step."""
+    """What a worker needs to run one task: its files by name (the task file first), the session seed, the last step,
+    the CPUs it may use and its time limit."""
 
     id: str
     files: dict[str, bytes] = field(repr=False)
     robot_spec: str  # the name of the robot spec among `files`
     seed: int
     until: str | None
+    cpus: int = 1
+    timeout: float = 1200.0  # s
 
 
 @dataclass(frozen=True)
@@ -73,10 +103,17 @@ def _failed_stage(session: Session, step: str) -> str:
     return emptied or tried[0].partition(":")[0]
 
 
+def _running(session: Session | None) -> str:
+    """The step a task was running (the first it had not finished), or "check" before its session existed."""
+    done = {r["name"] for r in session.records} if session else set()
+    return next((s.name for s in PIPELINE if s.name not in done), ERROR) if session else CHECK
+
+
 def _outcome(job: TaskJob, session: Session | None, failure: tuple[str, str] | None) -> TaskOutcome:
     records = {r["name"]: r["stats"] for r in session.records} if session else {}
     step, message = failure or ("", "")
-    stage = _failed_stage(session, step) if session and step in records else ""
+    timed_out = failure is not None and message.startswith("ran past the suite's task_timeout")
+    stage = TIMEOUT if timed_out else _failed_stage(session, step) if session and step in records else ""
     motion = records.get("motion", {}) if step != "motion" else {}  # a failed motion has no duration nor length
     return TaskOutcome(job.id, failure is None, step, stage, message, tuple(records),
                        records.get("double_grasps", {}).get("double_grasps"), motion.get("duration"), motion.get("path_length"))
@@ -93,9 +130,12 @@ def run_job(job: TaskJob) -> JobResult:
         spec = cached_spec_file(job.files[job.robot_spec].decode(), job.robot_spec, task)
         session, failure = None, None
         try:
-            scene = scene_from_dict(load_toml(task), task, robot_path=spec)
-            session = Session.create(folder, scene, job.seed)
-            run_pipeline(session, job.until, warn=lambda message: None)
+            with time_limit(job.timeout), cpu_budget(job.cpus):
+                scene = scene_from_dict(load_toml(task), task, robot_path=spec)
+                session = Session.create(folder, scene, job.seed)
+                run_pipeline(session, job.until, warn=lambda message: None)
+        except TaskTimeout:
+            failure = (_running(session), f"ran past the suite's task_timeout of {job.timeout:g} s")
         except StepFailed as exc:
             failure = (exc.step, exc.failure)
         except RegraspError as exc:

@@ -7,6 +7,8 @@ tasks = 60            # how many tasks to generate
 seed = 0              # the generation seed: the same suite and seed give the same tasks
 plan_seed = 0         # every task's session seed (one seed for all: they share the cached grasp lists and roadmap)
 attempts = 30         # placements sampled for a task before its region is declared unable to yield a valid task
+task_cpus = 1         # CPUs each task may use (its grasp search, transits...): a suite runs --workers tasks at once
+task_timeout = 1200   # seconds a task may run before it is recorded as failed at stage "timeout"
 
 [[objects]]           # the statuette, a mesh file (beside the suite or in assets/objects/, with scale and up), or a shape
 name = "box_long"
@@ -41,6 +43,8 @@ SUITES_DIR = ASSETS / "suites"
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,39}")  # object and region names become file names and report labels
 MAX_TASKS = 100_000
 MAX_ATTEMPTS = 1000
+MAX_TASK_CPUS = 256
+MAX_TASK_TIMEOUT = 7 * 24 * 3600  # s
 
 
 @dataclass(frozen=True)
@@ -83,6 +87,8 @@ class SuiteSpec:
     seed: int
     plan_seed: int
     attempts: int
+    task_cpus: int
+    task_timeout: float  # s
     handover: bool
     objects: tuple[SuiteObject, ...]
     initial_regions: tuple[Region, ...]
@@ -109,6 +115,13 @@ def _int(tab: Table, key: str, default: int, low: int, high: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
         raise tab.error(key, f"expected an integer from {low} to {high}, got {value!r}")
     return value
+
+
+def _timeout(tab: Table) -> float:
+    value = tab.data.get("task_timeout", 1200)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= MAX_TASK_TIMEOUT:
+        raise tab.error("task_timeout", f"expected seconds, more than 0 and at most {MAX_TASK_TIMEOUT}, got {value!r}")
+    return float(value)
 
 
 def _range(tab: Table, key: str, limit: float, default: Any = None) -> tuple[float, float]:
@@ -183,7 +196,8 @@ def load_suite(path: str | Path) -> SuiteSpec:
     path = find_suite(path)
     data = load_toml(path)
     root = Table(data, path)
-    root.check_keys({"name", "description", "task", "tasks", "seed", "plan_seed", "attempts", "handover", "objects",
+    root.check_keys({"name", "description", "task", "tasks", "seed", "plan_seed", "attempts", "task_cpus", "task_timeout", "handover",
+                    "objects",
                      "initial_regions", "final_regions"})
     task_value = root.str("task")
     beside = path.parent / task_value
@@ -200,5 +214,6 @@ def load_suite(path: str | Path) -> SuiteSpec:
             raise root.error(key, "expected at least one")
     return SuiteSpec(path, path.read_text(), root.str("name"), base_task.resolve(), _int(root, "tasks", 10, 1, MAX_TASKS),
                      _int(root, "seed", 0, 0, 2**63 - 1), _int(root, "plan_seed", 0, 0, 2**63 - 1),
-                     _int(root, "attempts", 30, 1, MAX_ATTEMPTS), root.bool("handover", default=True), objects,
+                     _int(root, "attempts", 30, 1, MAX_ATTEMPTS), _int(root, "task_cpus", 1, 1, MAX_TASK_CPUS),
+                     _timeout(root), root.bool("handover", default=True), objects,
                      regions["initial_regions"], regions["final_regions"])
