@@ -16,7 +16,7 @@ import numpy as np
 from .errors import InputError
 
 MAX_ARRAY_BYTES = 256 * 2**20  # one array: the example session's largest is 1.8 MB
-MAX_FILE_BYTES = 512 * 2**20  # every array read from one file
+MAX_READ_BYTES = 1024 * 2**20  # every array read for one session (or from one file read alone)
 Shape = tuple[int | str | None, ...]  # an int, a name of a dimension shared between arrays, or None for any
 
 
@@ -34,15 +34,30 @@ def _readable(path: Path, field: str | None) -> Iterator[None]:
         raise InputError(path, field, f"not a readable .npz file (truncated or corrupt: {type(exc).__name__}: {exc})") from exc
 
 
+class Budget:
+    """The bytes of array data that may still be decompressed: one budget is shared by every file of a session, so
+    that many files of legal arrays cannot add up to a bomb either."""
+
+    def __init__(self, total: int | None = None):
+        self.total = MAX_READ_BYTES if total is None else total
+        self.left = self.total
+
+    def spend(self, size: int, path: Path, field: str) -> None:
+        if size > self.left:
+            raise InputError(path, field, f"its {size:,} bytes would bring the arrays read to more than the "
+                                          f"{self.total:,} bytes allowed for one session")
+        self.left -= size
+
+
 class NpzFile:
     """An open .npz file read entry by entry: `header` checks an entry before `read` decompresses it."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, budget: Budget | None = None):
         self.path = path
+        self.budget = Budget() if budget is None else budget
         with _readable(path, None):
             self._zip = zipfile.ZipFile(path)
         self._checked: dict[str, int] = {}  # entry -> its data's size in bytes, once its header is checked
-        self._total = 0
 
     def __enter__(self) -> NpzFile:
         return self
@@ -58,7 +73,7 @@ class NpzFile:
                check: Callable[[tuple[int, ...]], None] | None = None, max_bytes: int = MAX_ARRAY_BYTES) -> tuple[int, ...]:
         """The shape of array `name`, checked without reading its data: its dtype (a flexible one such as "U" by kind),
         its shape (names in `dims` agreeing between arrays; then `check`, the caller's own limits, if given), its size
-        (`max_bytes`, MAX_FILE_BYTES for the file) and the zip entry's uncompressed size."""
+        (`max_bytes`, and what is left of the budget) and the zip entry's uncompressed size."""
         field = name
         if f"{name}.npy" not in self._zip.namelist():
             raise InputError(self.path, field, "missing array")
@@ -91,10 +106,7 @@ class NpzFile:
             raise InputError(self.path, field, f"its header declares {size:,} bytes of data but the entry holds "
                                                f"{info.file_size - offset:,}: truncated or corrupt")
         if name not in self._checked:
-            self._total += size
-        if self._total > MAX_FILE_BYTES:
-            raise InputError(self.path, field, f"its arrays hold {self._total:,} bytes so far, more than the {MAX_FILE_BYTES:,} "
-                                               "allowed for one file")
+            self.budget.spend(size, self.path, field)
         self._checked[name] = size
         return tuple(got_shape)
 
@@ -106,10 +118,11 @@ class NpzFile:
             return np.lib.format.read_array(f, allow_pickle=False)
 
 
-def read_npz(path: Path, declared: dict[str, tuple[np.dtype, Shape]], dims: dict[str, int] | None = None) -> dict[str, np.ndarray]:
+def read_npz(path: Path, declared: dict[str, tuple[np.dtype, Shape]], dims: dict[str, int] | None = None,
+             budget: Budget | None = None) -> dict[str, np.ndarray]:
     """The arrays `declared` (name -> dtype and shape) of an .npz file, every header checked before any data is read;
     other entries are never read. `dims` fixes (and collects) the named dimensions."""
-    with NpzFile(path) as npz:
+    with NpzFile(path, budget) as npz:
         for name, (dtype, shape) in declared.items():
             npz.header(name, dtype, shape, dims)
         return {name: npz.read(name) for name in declared}

@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from .errors import InputError, RegraspError
-from .npz import read_npz
+from .npz import Budget, read_npz
 
 R = TypeVar("R")
 
@@ -184,18 +184,18 @@ def read_json_object(path: Path) -> dict[str, Any]:
     return data
 
 
-def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | None = None) -> R:
+def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | None = None, budget: Budget | None = None) -> R:
     """Read a result written by `save_result`, checking every field; errors name the file and field.
 
     Only the arrays `cls` declares are read, each header checked before its data (see npz.py).
-    `dims` fixes named dimensions known from the scene (e.g. nq, the robot's DoF)."""
+    `dims` fixes named dimensions known from the scene (e.g. nq, the robot's DoF); `budget` is shared by a session's files."""
     npz_path, json_path = folder / f"{stem}.npz", folder / f"{stem}.json"
     for p in (npz_path, json_path):
         regular_file(p, "the session lists this step as finished but its file is gone")
     rest = read_json_object(json_path)
     fields = dataclasses.fields(cls)
     declared = {f.name: (np.dtype(f.metadata["dtype"]), f.metadata["shape"]) for f in fields if _is_array(f)}
-    arrays = read_npz(npz_path, declared, dict(dims or {}))
+    arrays = read_npz(npz_path, declared, dict(dims or {}), budget)
     values: dict[str, Any] = {}
     for f in fields:
         if _is_array(f):

@@ -25,7 +25,7 @@ import trimesh
 
 from . import __version__
 from .errors import InputError, RegraspError
-from .npz import NpzFile
+from .npz import Budget, NpzFile
 from .object_mesh import MAX_FACES, check_face_count
 from .paths import cache_dir, file_in, plain_name
 from .pipeline import PIPELINE, step_named
@@ -74,12 +74,12 @@ def _save_meshes(folder: Path, meshes: dict[str, trimesh.Trimesh]) -> None:
     atomic_write_bytes(folder / MESHES, buf.getvalue())
 
 
-def _load_meshes(folder: Path) -> dict[str, trimesh.Trimesh]:
+def _load_meshes(folder: Path, budget: Budget) -> dict[str, trimesh.Trimesh]:
     """The embedded meshes, each checked before its data is read (a string key, finite (n, 3) float64 vertices, at most
     MAX_FACES (m, 3) integer faces indexing them); `task._mesh` checks each as a mesh file is checked when the task names it."""
     path = regular_file(folder / MESHES, "the session's embedded meshes are gone")
     out = {}
-    with NpzFile(path) as npz:
+    with NpzFile(path, budget) as npz:
         n = len([k for k in npz.names() if k.endswith("_key")])
         if n > MAX_OBSTACLES + 1:
             _fail(path, None, f"holds {n:,} meshes; a task names at most {MAX_OBSTACLES + 1} (its object and its obstacles)")
@@ -229,11 +229,12 @@ def check_manifest(manifest: dict[str, Any], path: Path) -> None:
 class Session:
     """An open session folder: its manifest, its scene and the results of its finished steps."""
 
-    def __init__(self, folder: Path, manifest: dict[str, Any], scene: Scene):
+    def __init__(self, folder: Path, manifest: dict[str, Any], scene: Scene, budget: Budget | None = None):
         self.folder = folder
         self.manifest = manifest
         self.scene = scene
         self._results: dict[str, Any] = {}
+        self._budget = Budget() if budget is None else budget  # the array bytes its files may still decompress
 
     @property
     def seed(self) -> int:
@@ -305,14 +306,15 @@ class Session:
             load_robot(spec)
         except RegraspError as exc:
             raise InputError(path, "robot_spec", f"the embedded robot spec is not valid: {exc}") from exc
-        meshes = _load_meshes(folder)
+        budget = Budget()
+        meshes = _load_meshes(folder, budget)
         try:
             scene = scene_from_dict(manifest["task"], path, robot_path=spec, meshes=meshes, field_prefix="task", embedded=MESHES)
         except InputError:
             raise
         except (RegraspError, TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError) as exc:
             raise InputError(path, "task", f"not a valid task ({type(exc).__name__}: {exc})") from exc
-        session = cls(folder, manifest, scene)
+        session = cls(folder, manifest, scene, budget)
         for name in session.finished():
             session.result(name)
         return session
@@ -322,7 +324,7 @@ class Session:
         if name not in self._results:
             if name not in self.finished():
                 raise RegraspError(f"step '{name}' has not run in {self.folder}")
-            self._results[name] = load_result(step_named(name).result, self.folder, name, {"nq": self.scene.robot.nq})
+            self._results[name] = load_result(step_named(name).result, self.folder, name, {"nq": self.scene.robot.nq}, self._budget)
         return self._results[name]
 
     def record(self, step: Step, params: Any, seed: int, seconds: float, result: Any, stage_seconds: list[float] = ()) -> None:

@@ -155,3 +155,15 @@ def test_an_entry_larger_than_its_header_says_is_refused(session: Path) -> None:
     err = _open_error(session)
     assert (err.source, err.field) == (str(session / "arms.npz"), "q_pick")
     assert "truncated or corrupt" in err.detail
+
+
+def test_the_arrays_of_all_a_sessions_files_share_one_budget(session: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Files each within the limit cannot add up to a bomb: with a 3 MiB budget, the example's 3.8 MB of arrays are
+    refused at the file that crosses it, naming the limit."""
+    sizes = {p.name: sum(i.file_size for i in zipfile.ZipFile(p).infolist()) for p in session.glob("*.npz")}
+    limit = 3 * 2**20
+    assert max(sizes.values()) < limit < sum(sizes.values())
+    monkeypatch.setattr("planner.npz.MAX_READ_BYTES", limit)
+    err = _open_error(session)
+    assert err.source.endswith(".npz") and Path(err.source).parent == session
+    assert f"{limit:,} bytes allowed for one session" in err.detail, err.detail
