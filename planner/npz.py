@@ -74,39 +74,39 @@ class NpzFile:
         """The shape of array `name`, checked without reading its data: its dtype (a flexible one such as "U" by kind),
         its shape (names in `dims` agreeing between arrays; then `check`, the caller's own limits, if given), its size
         (`max_bytes`, and what is left of the budget) and the zip entry's uncompressed size."""
-        field = name
-        if f"{name}.npy" not in self._zip.namelist():
-            raise InputError(self.path, field, "missing array")
-        info = self._zip.getinfo(f"{name}.npy")
-        with _readable(self.path, field), self._zip.open(info) as f:
+        try:
+            info = self._zip.getinfo(f"{name}.npy")
+        except KeyError:
+            raise InputError(self.path, name, "missing array") from None
+        with _readable(self.path, name), self._zip.open(info) as f:
             version = np.lib.format.read_magic(f)
             if version not in ((1, 0), (2, 0)):
-                raise InputError(self.path, field, f"an .npy header of version {version}; expected 1.0 or 2.0")
+                raise InputError(self.path, name, f"an .npy header of version {version}; expected 1.0 or 2.0")
             read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
             got_shape, _, got = read(f)
             offset = f.tell()
         same = got.kind == dtype.kind if dtype.itemsize == 0 else got == dtype
         if got.hasobject or not same:
-            raise InputError(self.path, field, f"expected dtype {dtype}, got {got}")
+            raise InputError(self.path, name, f"expected dtype {dtype}, got {got}")
         if len(got_shape) != len(shape):
-            raise InputError(self.path, field, f"expected {len(shape)} dimensions {shape_text(shape)}, got shape {got_shape}")
+            raise InputError(self.path, name, f"expected {len(shape)} dimensions {shape_text(shape)}, got shape {got_shape}")
         dims = {} if dims is None else dims
         for n, want in zip(got_shape, shape):
             if isinstance(want, int) and n != want:
-                raise InputError(self.path, field, f"expected shape {shape_text(shape)}, got {got_shape}")
+                raise InputError(self.path, name, f"expected shape {shape_text(shape)}, got {got_shape}")
             if isinstance(want, str) and dims.setdefault(want, n) != n:
-                raise InputError(self.path, field, f"expected shape {shape_text(shape)} with {want} = {dims[want]}, got {got_shape}")
+                raise InputError(self.path, name, f"expected shape {shape_text(shape)} with {want} = {dims[want]}, got {got_shape}")
         if check is not None:
             check(tuple(got_shape))
         size = math.prod(got_shape) * got.itemsize
         if size > max_bytes:
-            raise InputError(self.path, field, f"declares {got_shape} {got}: {size:,} bytes, more than the {max_bytes:,} "
+            raise InputError(self.path, name, f"declares {got_shape} {got}: {size:,} bytes, more than the {max_bytes:,} "
                                                "allowed for this array")
         if info.file_size != offset + size:
-            raise InputError(self.path, field, f"its header declares {size:,} bytes of data but the entry holds "
+            raise InputError(self.path, name, f"its header declares {size:,} bytes of data but the entry holds "
                                                f"{info.file_size - offset:,}: truncated or corrupt")
         if name not in self._checked:
-            self.budget.spend(size, self.path, field)
+            self.budget.spend(size, self.path, name)
         self._checked[name] = size
         return tuple(got_shape)
 
