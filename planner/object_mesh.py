@@ -135,32 +135,46 @@ def _checked_path(path: Path) -> str:
     return file_type
 
 
+def check_face_count(count: int, source: str | Path, field: str | None = None) -> None:
+    """Refuse a mesh of more than MAX_FACES triangles (checked before it is repaired, or decompressed from a session)."""
+    if count > MAX_FACES:
+        raise InputError(source, field, f"has {count:,} triangles, more than the {MAX_FACES:,} allowed; "
+                                        "simplify (decimate) the mesh first")
+
+
 def load_mesh(path: str | Path, limits: SizeLimits = OBJECT_LIMITS, options: MeshOptions = MeshOptions()) -> trimesh.Trimesh:
     """Load an OBJ/STL/PLY/OFF/GLB file as one repaired, closed triangle mesh in metres and z-up, within `limits`."""
     path = Path(path)
-    mesh = _read(path, _checked_path(path))
-    if len(mesh.faces) > MAX_FACES:
-        raise InputError(path, None, f"has {len(mesh.faces):,} triangles, more than the {MAX_FACES:,} allowed; "
-                                     "simplify (decimate) the mesh first")
+    return checked_mesh(_read(path, _checked_path(path)), path, limits, options)
+
+
+def checked_mesh(mesh: trimesh.Trimesh, source: str | Path, limits: SizeLimits, options: MeshOptions | None = MeshOptions()
+                 ) -> trimesh.Trimesh:
+    """The checks every mesh passes, read from a file or embedded in a session: its triangle count, finite vertices, a
+    closed volume and a size within `limits`. A file's mesh is repaired first and placed by `options`; an embedded one
+    (`options` None) was saved repaired and placed, and is checked as it is: it is what the session's steps planned on."""
+    check_face_count(len(mesh.faces), source)
     if not np.all(np.isfinite(mesh.vertices)):
-        raise InputError(path, None, "has vertices with NaN or infinite coordinates; expected finite coordinates")
+        raise InputError(source, None, "has vertices with NaN or infinite coordinates; expected finite coordinates")
     try:
         with np.errstate(all="ignore"):  # a flat or open mesh divides by a zero volume in trimesh
-            _repair(mesh)
+            if options is not None:
+                _repair(mesh)
             problem = defect(mesh) if len(mesh.faces) else ""
     except Exception as exc:  # a library failure inside the repair: name it, never a traceback
-        raise InputError(path, None, f"could not be repaired into a closed mesh ({type(exc).__name__}: {exc})") from exc
+        raise InputError(source, None, f"could not be repaired into a closed mesh ({type(exc).__name__}: {exc})") from exc
     if len(mesh.faces) == 0:
-        raise InputError(path, None, "is empty: all its triangles are degenerate; expected a closed triangle mesh")
-    mesh.apply_transform(options.transform())
+        raise InputError(source, None, "is empty: all its triangles are degenerate; expected a closed triangle mesh")
+    if options is not None:
+        mesh.apply_transform(options.transform())
     size = float(mesh.extents.max())
     if size < limits.low or size > limits.high:
-        shown = f" (after scale = {options.scale:g})" if options.scale != 1.0 else ""
-        raise InputError(path, None, f"has an absurd size for an {limits.what}: its largest extent is {size:.6g} m{shown}, "
-                                     f"expected between {limits.low:g} m and {limits.high:g} m ({likely_unit(size, limits.typical)})")
+        shown = f" (after scale = {options.scale:g})" if options is not None and options.scale != 1.0 else ""
+        raise InputError(source, None, f"has an absurd size for an {limits.what}: its largest extent is {size:.6g} m{shown}, "
+                                       f"expected between {limits.low:g} m and {limits.high:g} m ({likely_unit(size, limits.typical)})")
     if problem:
-        raise InputError(path, None, f"is not a closed volume after repair: {problem}; "
-                                     "expected a closed, watertight surface around a solid")
+        raise InputError(source, None, f"is not a closed volume after repair: {problem}; "
+                                       "expected a closed, watertight surface around a solid")
     return mesh
 
 

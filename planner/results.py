@@ -13,8 +13,6 @@ import errno
 import io
 import json
 import os
-import zipfile
-import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, TypeVar
@@ -22,6 +20,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from .errors import InputError, RegraspError
+from .npz import Budget, read_npz
 
 R = TypeVar("R")
 
@@ -116,10 +115,17 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-able: declare it with results.array(...)")
 
 
+def not_a_link(path: Path, why: str) -> Path:
+    """`path` unless it is a symbolic link (read or written through, it would reach outside its folder): an InputError
+    naming it and `why` it must be plain."""
+    if path.is_symlink():
+        raise InputError(path, None, f"a symbolic link: {why}")
+    return path
+
+
 def regular_file(path: Path, missing: str) -> Path:
     """`path` if it is a regular file (not a link, a folder or a device); else an InputError (`missing` says why it should be there)."""
-    if path.is_symlink():
-        raise InputError(path, None, "a symbolic link: a session's files must be plain files inside its folder")
+    not_a_link(path, "a session's files must be plain files inside its folder")
     if not path.exists():
         raise InputError(path, None, f"missing: {missing}")
     if not path.is_file():
@@ -127,35 +133,73 @@ def regular_file(path: Path, missing: str) -> Path:
     return path
 
 
+MAX_DEPTH = 64  # lists and objects inside each other: deeper is no data regrasp writes, and Python's recursion ends near 1000
+MAX_INT_DIGITS = 100  # Python refuses to convert integers of more than 4300 digits; no field regrasp reads needs 100
+
+
+class _LongInt(str):
+    """An integer literal too long to convert, kept as its text so that `check_nesting` can name the field holding it."""
+
+
+def _int(text: str) -> int | _LongInt:
+    return int(text) if len(text.lstrip("-")) <= MAX_INT_DIGITS else _LongInt(text)
+
+
+def parse_json(text: str) -> Any:
+    """JSON text as Python data, integers too long to convert kept as text for `check_nesting` to refuse by field."""
+    return json.loads(text, parse_int=_int)
+
+
+def check_nesting(data: Any, source: str | Path, root: str = "") -> None:
+    """Refuse data read from a file that is nested more than MAX_DEPTH deep or holds an integer of more than MAX_INT_DIGITS
+    digits (Python's recursion and integer conversion would end in a traceback), naming the field."""
+    stack = [(data, root, 0)]
+    while stack:
+        node, field, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            shown = field if len(field) <= 80 else field[:77] + "..."
+            raise InputError(source, shown or None, f"nested more than {MAX_DEPTH} levels deep; expected plain values")
+        digits = len(node.lstrip("-")) if isinstance(node, _LongInt) else \
+            len(str(abs(node))) if type(node) is int and node.bit_length() > 3 * MAX_INT_DIGITS else 0
+        if digits > MAX_INT_DIGITS:
+            raise InputError(source, field or None, f"an integer of {digits:,} digits; expected at most {MAX_INT_DIGITS} digits")
+        if isinstance(node, dict):
+            stack.extend((v, f"{field}.{k}" if field else str(k), depth + 1) for k, v in node.items())
+        elif isinstance(node, list):
+            stack.extend((v, f"{field}[{i}]", depth + 1) for i, v in enumerate(node))
+
+
 def read_json_object(path: Path) -> dict[str, Any]:
-    """A JSON file that must hold an object; anything else is an InputError naming the file."""
+    """A JSON file that must hold an object (nested at most MAX_DEPTH deep, integers of at most MAX_INT_DIGITS digits);
+    anything else is an InputError naming the file (and the field)."""
     try:
-        data = json.loads(path.read_text())
+        data = parse_json(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(path, None, f"not valid JSON ({type(exc).__name__}: {exc})") from exc
     except OSError as exc:
         raise InputError(path, None, f"cannot be read ({os.strerror(exc.errno) if exc.errno else exc})") from exc
     if not isinstance(data, dict):
         raise InputError(path, None, "expected a JSON object")
+    check_nesting(data, path)
     return data
 
 
-def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | None = None) -> R:
+def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | None = None, budget: Budget | None = None) -> R:
     """Read a result written by `save_result`, checking every field; errors name the file and field.
 
-    `dims` fixes named dimensions known from the scene (e.g. nq, the robot's DoF)."""
+    Only the arrays `cls` declares are read, each header checked before its data (see npz.py).
+    `dims` fixes named dimensions known from the scene (e.g. nq, the robot's DoF); `budget` is shared by a session's files."""
     npz_path, json_path = folder / f"{stem}.npz", folder / f"{stem}.json"
     for p in (npz_path, json_path):
         regular_file(p, "the session lists this step as finished but its file is gone")
     rest = read_json_object(json_path)
-    arrays = read_npz(npz_path)
+    fields = dataclasses.fields(cls)
+    declared = {f.name: (np.dtype(f.metadata["dtype"]), f.metadata["shape"]) for f in fields if _is_array(f)}
+    arrays = read_npz(npz_path, declared, dict(dims or {}), budget)
     values: dict[str, Any] = {}
-    dims = dict(dims or {})
-    for f in dataclasses.fields(cls):
+    for f in fields:
         if _is_array(f):
-            if f.name not in arrays:
-                raise InputError(npz_path, f.name, "missing array")
-            values[f.name] = _checked(arrays[f.name], f, npz_path, dims)
+            values[f.name] = _finite(arrays[f.name], npz_path, f.name)
         else:
             if f.name not in rest:
                 raise InputError(json_path, f.name, "missing field")
@@ -166,33 +210,9 @@ def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | No
     return cls(**values)
 
 
-def read_npz(path: Path) -> dict[str, np.ndarray]:
-    """Every array of an .npz file (no pickles); a truncated or corrupt file is an InputError naming it."""
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            return {k: npz[k] for k in npz.files}
-    # NotImplementedError: what zipfile raises for a compression method it does not support (a crafted entry)
-    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError, NotImplementedError) as exc:
-        raise InputError(path, None, f"not a readable .npz file (truncated or corrupt: {type(exc).__name__}: {exc})") from exc
-
-
-def _checked(value: np.ndarray, f: dataclasses.Field, path: Path, dims: dict[str, int]) -> np.ndarray:
-    want_dtype, want_shape = np.dtype(f.metadata["dtype"]), f.metadata["shape"]
-    if value.dtype != want_dtype:
-        raise InputError(path, f.name, f"expected dtype {want_dtype}, got {value.dtype}")
-    if len(value.shape) != len(want_shape):
-        raise InputError(path, f.name, f"expected {len(want_shape)} dimensions {_shape_text(want_shape)}, got shape {value.shape}")
-    for got, want in zip(value.shape, want_shape):
-        if isinstance(want, int) and got != want:
-            raise InputError(path, f.name, f"expected shape {_shape_text(want_shape)}, got {value.shape}")
-        if isinstance(want, str):
-            if dims.setdefault(want, got) != got:
-                raise InputError(path, f.name, f"expected shape {_shape_text(want_shape)} with {want} = {dims[want]}, got {value.shape}")
+def _finite(value: np.ndarray, path: Path, field: str) -> np.ndarray:
+    """`value` made read-only, once its floats are checked to be finite."""
     if value.dtype.kind in "fc" and not np.isfinite(value).all():
-        raise InputError(path, f.name, f"expected finite numbers, found {np.count_nonzero(~np.isfinite(value))} NaN or infinite")
+        raise InputError(path, field, f"expected finite numbers, found {np.count_nonzero(~np.isfinite(value))} NaN or infinite")
     value.setflags(write=False)
     return value
-
-
-def _shape_text(shape: tuple) -> str:
-    return "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"

@@ -25,6 +25,8 @@ import trimesh
 
 from . import __version__
 from .errors import InputError, RegraspError
+from .npz import Budget, NpzFile
+from .object_mesh import MAX_FACES, check_face_count
 from .paths import cache_dir, file_in, plain_name
 from .pipeline import PIPELINE, step_named
 from .results import (
@@ -32,14 +34,13 @@ from .results import (
     atomic_write_text,
     load_result,
     read_json_object,
-    read_npz,
     regular_file,
     save_result,
     writing,
 )
 from .robot import load_robot
 from .steps import Step
-from .task import Scene, scene_from_dict, task_reference
+from .task import MAX_OBSTACLES, Scene, scene_from_dict, task_reference
 
 FORMAT_VERSION = 1
 MANIFEST = "session.json"
@@ -48,6 +49,7 @@ STEP_KEYS = ("name", "params", "seed", "seconds", "stats", "files")
 OPTIONAL_STEP_KEYS = ("stage_seconds",)
 MANIFEST_KEYS = ("format_version", "task", "robot_spec", "robot_spec_name", "seed", "versions", "steps")
 MAX_SPEC_CHARS = 1_000_000
+MAX_KEY_CHARS = 1000  # an embedded mesh's key: the task's mesh value, its scale and up axis
 
 
 def package_versions() -> dict[str, str]:
@@ -72,25 +74,33 @@ def _save_meshes(folder: Path, meshes: dict[str, trimesh.Trimesh]) -> None:
     atomic_write_bytes(folder / MESHES, buf.getvalue())
 
 
-def _load_meshes(folder: Path) -> dict[str, trimesh.Trimesh]:
-    """The embedded meshes, each checked (string key, finite (n, 3) vertices, (m, 3) faces indexing them)."""
+def _load_meshes(folder: Path, budget: Budget) -> dict[str, trimesh.Trimesh]:
+    """The embedded meshes, each checked before its data is read (a string key, finite (n, 3) float64 vertices, at most
+    MAX_FACES (m, 3) integer faces indexing them); `task._mesh` checks each as a mesh file is checked when the task names it."""
     path = regular_file(folder / MESHES, "the session's embedded meshes are gone")
-    arrays = read_npz(path)
-    n = len([k for k in arrays if k.endswith("_key")])
     out = {}
-    for i in range(n):
-        key, vertices, faces = (arrays.get(f"{i}_{part}") for part in ("key", "vertices", "faces"))
-        if key is None or vertices is None or faces is None:
-            raise InputError(path, f"{i}_key", "expected the arrays <i>_key, <i>_vertices and <i>_faces for every mesh")
-        if key.dtype.kind != "U" or key.shape != ():
-            raise InputError(path, f"{i}_key", f"expected a string, got {key.dtype} of shape {key.shape}")
-        if vertices.dtype != np.float64 or vertices.ndim != 2 or vertices.shape[1] != 3 or not np.isfinite(vertices).all():
-            raise InputError(path, f"{i}_vertices", f"expected finite float64 (n, 3), got {vertices.dtype} of shape {vertices.shape}")
-        out_of_range = faces.size and (faces.min() < 0 or faces.max() >= len(vertices))
-        if faces.dtype.kind not in "iu" or faces.ndim != 2 or faces.shape[1] != 3 or out_of_range:
-            raise InputError(path, f"{i}_faces", f"expected (m, 3) integer indices below {len(vertices)}")
-        out[str(key)] = trimesh.Trimesh(vertices, faces, process=False)
+    with NpzFile(path, budget) as npz:
+        n = len([k for k in npz.names() if k.endswith("_key")])
+        if n > MAX_OBSTACLES + 1:
+            _fail(path, None, f"holds {n:,} meshes; a task names at most {MAX_OBSTACLES + 1} (its object and its obstacles)")
+        for i in range(n):
+            npz.header(f"{i}_key", np.dtype("U"), (), max_bytes=4 * MAX_KEY_CHARS)
+            npz.header(f"{i}_vertices", np.dtype(np.float64), ("n", 3), {}, lambda shape, i=i: _vertex_count(shape[0], path, i))
+            npz.header(f"{i}_faces", np.dtype(np.int64), ("m", 3), {}, lambda shape, i=i: check_face_count(shape[0], path, f"{i}_faces"))
+            key, vertices, faces = (npz.read(f"{i}_{part}") for part in ("key", "vertices", "faces"))
+            if not np.isfinite(vertices).all():
+                _fail(path, f"{i}_vertices", "expected finite coordinates, found NaN or infinite ones")
+            if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
+                _fail(path, f"{i}_faces", f"expected (m, 3) integer indices below {len(vertices)}")
+            out[str(key)] = trimesh.Trimesh(vertices, faces, process=False)
     return out
+
+
+def _vertex_count(count: int, path: Path, i: int) -> None:
+    """Refuse more vertices than MAX_FACES triangles can use (three each)."""
+    if count > 3 * MAX_FACES:
+        _fail(path, f"{i}_vertices", f"has {count:,} vertices, more than the {3 * MAX_FACES:,} allowed "
+                                     f"(three for each of at most {MAX_FACES:,} triangles)")
 
 
 def cached_spec_file(text: str, name: str, manifest: Path) -> Path:
@@ -109,11 +119,11 @@ def step_files(name: str) -> list[str]:
     return [f"{name}.npz", f"{name}.json"]
 
 
-def _fail(path: Path, field: str, message: str) -> NoReturn:
+def _fail(path: Path, field: str | None, message: str) -> NoReturn:
     raise InputError(path, field, message)
 
 
-def _typed(value: Any, kind: type | tuple[type, ...], path: Path, field: str, what: str) -> Any:
+def typed(value: Any, kind: type | tuple[type, ...], path: Path, field: str, what: str) -> Any:
     """`value` if it is of `kind` (bools are not numbers here), else an InputError saying what was expected."""
     if isinstance(value, bool) and bool not in (kind if isinstance(kind, tuple) else (kind,)) or not isinstance(value, kind):
         _fail(path, field, f"expected {what}, got {type(value).__name__} {_short(value)}")
@@ -126,14 +136,14 @@ def _short(value: Any) -> str:
 
 
 def _seed(value: Any, path: Path, field: str) -> int:
-    _typed(value, int, path, field, "an integer seed")
+    typed(value, int, path, field, "an integer seed")
     if not 0 <= value < 2**64:
         _fail(path, field, f"expected a seed from 0 to 2**64 - 1, got {value}")
     return value
 
 
-def _seconds(value: Any, path: Path, field: str) -> float:
-    _typed(value, (int, float), path, field, "a number of seconds")
+def checked_seconds(value: Any, path: Path, field: str) -> float:
+    typed(value, (int, float), path, field, "a number of seconds")
     if not math.isfinite(value) or value < 0:
         _fail(path, field, f"expected a finite number of seconds >= 0, got {value}")
     return value
@@ -148,7 +158,7 @@ def _finite_params(params: dict[str, Any], path: Path, field: str) -> None:
 def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
     """One `steps[]` record: its keys, a known step after those it needs, and well-typed values."""
     field = f"steps[{index}]"
-    _typed(record, dict, path, field, f"an object with {', '.join(STEP_KEYS)}")
+    typed(record, dict, path, field, f"an object with {', '.join(STEP_KEYS)}")
     for key in STEP_KEYS:
         if key not in record:
             _fail(path, f"{field}.{key}", "missing field")
@@ -156,7 +166,7 @@ def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
     if unknown:
         _fail(path, f"{field}.{unknown[0]}", "unknown field")
     order = [s.name for s in PIPELINE]
-    name = _typed(record["name"], str, path, f"{field}.name", "a step name")
+    name = typed(record["name"], str, path, f"{field}.name", "a step name")
     if name not in order:
         _fail(path, f"{field}.name", f"no step {_short(name)} (steps: {', '.join(order)})")
     if name in done:
@@ -167,36 +177,23 @@ def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
     for need in step.needs:
         if need not in done:
             _fail(path, f"{field}.name", f"step '{name}' needs '{need}', which is not listed before it")
-    params = _typed(record["params"], dict, path, f"{field}.params", "an object of parameters")
+    params = typed(record["params"], dict, path, f"{field}.params", "an object of parameters")
     _finite_params(params, path, f"{field}.params")  # first: it names the parameter's own field
     try:
         step.make_params(params)
     except RegraspError as exc:
         raise InputError(path, f"{field}.params", str(exc)) from exc
     _seed(record["seed"], path, f"{field}.seed")
-    _seconds(record["seconds"], path, f"{field}.seconds")
-    _typed(record["stats"], dict, path, f"{field}.stats", "an object of statistics")
-    files = _typed(record["files"], list, path, f"{field}.files", "a list of file names")
+    checked_seconds(record["seconds"], path, f"{field}.seconds")
+    typed(record["stats"], dict, path, f"{field}.stats", "an object of statistics")
+    files = typed(record["files"], list, path, f"{field}.files", "a list of file names")
     for k, f in enumerate(files):
         plain_name(f, path, f"{field}.files[{k}]")
     if files != step_files(name):
         _fail(path, f"{field}.files", f"expected {step_files(name)}, got {_short(files)}")
     if "stage_seconds" in record:
-        for k, t in enumerate(_typed(record["stage_seconds"], list, path, f"{field}.stage_seconds", "a list of seconds")):
-            _seconds(t, path, f"{field}.stage_seconds[{k}]")
-
-
-def _only_embedded_meshes(task: dict[str, Any], meshes: dict[str, trimesh.Trimesh], path: Path) -> None:
-    """Every mesh the task names must be embedded: a session never makes regrasp read a mesh file from the disk."""
-    obj = task.get("object")
-    named = [("task.object.mesh", obj.get("mesh"))] if isinstance(obj, dict) else []
-    obstacles = task.get("obstacles")
-    for i, ob in enumerate(obstacles if isinstance(obstacles, list) else []):
-        if isinstance(ob, dict) and "mesh" in ob:
-            named.append((f"task.obstacles[{i}].mesh", ob["mesh"]))
-    for field, name in named:
-        if isinstance(name, str) and name not in meshes:
-            _fail(path, field, f"the mesh {_short(name)} is not embedded in the session's {MESHES}; a session reads no mesh file")
+        for k, t in enumerate(typed(record["stage_seconds"], list, path, f"{field}.stage_seconds", "a list of seconds")):
+            checked_seconds(t, path, f"{field}.stage_seconds[{k}]")
 
 
 def check_manifest(manifest: dict[str, Any], path: Path) -> None:
@@ -207,24 +204,24 @@ def check_manifest(manifest: dict[str, Any], path: Path) -> None:
     unknown = sorted(set(manifest) - set(MANIFEST_KEYS) - {"task_source"})
     if unknown:
         _fail(path, unknown[0], "unknown field")
-    version = _typed(manifest["format_version"], int, path, "format_version", "an integer format version")
+    version = typed(manifest["format_version"], int, path, "format_version", "an integer format version")
     if version > FORMAT_VERSION:
         _fail(path, "format_version", f"format {version!r} was written by a newer regrasp; this one reads formats up to {FORMAT_VERSION}")
     if version < 1:
         _fail(path, "format_version", f"expected a format version from 1 to {FORMAT_VERSION}, got {version}")
-    _typed(manifest["task"], dict, path, "task", "the task as a JSON object")
+    typed(manifest["task"], dict, path, "task", "the task as a JSON object")
     if "task_source" in manifest:
-        _typed(manifest["task_source"], str, path, "task_source", "the task's name or its path relative to the session, as a string")
-    spec = _typed(manifest["robot_spec"], str, path, "robot_spec", "the robot spec's text")
+        typed(manifest["task_source"], str, path, "task_source", "the task's name or its path relative to the session, as a string")
+    spec = typed(manifest["robot_spec"], str, path, "robot_spec", "the robot spec's text")
     if not spec.strip() or len(spec) > MAX_SPEC_CHARS:
         _fail(path, "robot_spec", f"expected the robot spec's text (1 to {MAX_SPEC_CHARS} characters), got {len(spec)} characters")
     plain_name(manifest["robot_spec_name"], path, "robot_spec_name")
     _seed(manifest["seed"], path, "seed")
-    versions = _typed(manifest["versions"], dict, path, "versions", "an object of package versions")
+    versions = typed(manifest["versions"], dict, path, "versions", "an object of package versions")
     for key, value in versions.items():
-        _typed(value, str, path, f"versions.{key}", "a version string")
+        typed(value, str, path, f"versions.{key}", "a version string")
     done: list[str] = []
-    for i, record in enumerate(_typed(manifest["steps"], list, path, "steps", "a list")):
+    for i, record in enumerate(typed(manifest["steps"], list, path, "steps", "a list")):
         _check_step(record, i, done, path)
         done.append(record["name"])
 
@@ -232,11 +229,12 @@ def check_manifest(manifest: dict[str, Any], path: Path) -> None:
 class Session:
     """An open session folder: its manifest, its scene and the results of its finished steps."""
 
-    def __init__(self, folder: Path, manifest: dict[str, Any], scene: Scene):
+    def __init__(self, folder: Path, manifest: dict[str, Any], scene: Scene, budget: Budget | None = None):
         self.folder = folder
         self.manifest = manifest
         self.scene = scene
         self._results: dict[str, Any] = {}
+        self._budget = Budget() if budget is None else budget  # the array bytes its files may still decompress
 
     @property
     def seed(self) -> int:
@@ -308,15 +306,15 @@ class Session:
             load_robot(spec)
         except RegraspError as exc:
             raise InputError(path, "robot_spec", f"the embedded robot spec is not valid: {exc}") from exc
-        meshes = _load_meshes(folder)
-        _only_embedded_meshes(manifest["task"], meshes, path)
+        budget = Budget()
+        meshes = _load_meshes(folder, budget)
         try:
-            scene = scene_from_dict(manifest["task"], path, robot_path=spec, meshes=meshes, field_prefix="task")
+            scene = scene_from_dict(manifest["task"], path, robot_path=spec, meshes=meshes, field_prefix="task", embedded=MESHES)
         except InputError:
             raise
         except (RegraspError, TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError) as exc:
             raise InputError(path, "task", f"not a valid task ({type(exc).__name__}: {exc})") from exc
-        session = cls(folder, manifest, scene)
+        session = cls(folder, manifest, scene, budget)
         for name in session.finished():
             session.result(name)
         return session
@@ -326,7 +324,7 @@ class Session:
         if name not in self._results:
             if name not in self.finished():
                 raise RegraspError(f"step '{name}' has not run in {self.folder}")
-            self._results[name] = load_result(step_named(name).result, self.folder, name, {"nq": self.scene.robot.nq})
+            self._results[name] = load_result(step_named(name).result, self.folder, name, {"nq": self.scene.robot.nq}, self._budget)
         return self._results[name]
 
     def record(self, step: Step, params: Any, seed: int, seconds: float, result: Any, stage_seconds: list[float] = ()) -> None:

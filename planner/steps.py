@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import RegraspError
-from .results import read_only
+from .errors import InputError, RegraspError
+from .results import MAX_DEPTH, check_nesting, parse_json, read_only
 from .task import Scene
 
 Progress = Callable[[float, str], None]
@@ -114,7 +114,10 @@ def parse_assignment(text: str) -> tuple[str, str, Any]:
     if not sep or not dot or not step or not param:
         raise RegraspError(f"--set expects step.param=value, got '{text}'")
     try:
-        value = json.loads(raw)
+        value = parse_json(raw)
     except json.JSONDecodeError:
         value = raw
+    except RecursionError as exc:
+        raise InputError("--set", key, f"nested deeper than Python can parse; expected at most {MAX_DEPTH} levels") from exc
+    check_nesting(value, "--set", key)
     return step, param, value

@@ -23,6 +23,7 @@ from .object_mesh import (
     UP_AXES,
     MeshOptions,
     SizeLimits,
+    checked_mesh,
     load_mesh,
 )
 from .paths import ASSETS, TASKS_DIR, named_file
@@ -33,6 +34,7 @@ BUILTIN_OBJECTS = {"statuette": ASSETS / "objects" / "statuette.obj"}
 MAX_OBSTACLES = 500  # more makes every collision check slow (check would run for minutes); merge small parts into meshes
 MAX_COORDINATE = 100.0  # m: a placement farther from the robot than this is a typo or a unit error
 MAX_ANGLE = 2 * np.pi + 1e-6  # rad: larger roll/pitch/yaw values are degrees given as radians
+MAX_DESCRIPTION = 2000  # characters: a sentence or a paragraph about the task
 MAX_SCALE = 1e4  # a mesh scale outside [1/MAX_SCALE, MAX_SCALE] is not a unit conversion
 
 
@@ -95,15 +97,31 @@ def _mesh_options(tab: Table) -> MeshOptions:
     return MeshOptions(scale, up)
 
 
-def _mesh(tab: Table, key: str, base: Path, meshes: dict[str, trimesh.Trimesh], limits: SizeLimits) -> trimesh.Trimesh:
-    """The mesh a field names, scaled and turned upright by the table's options: from `meshes` when given (a replayed
-    session), else from its file; a fault in the file is reported at the task's field, naming the mesh file."""
-    value, options = tab.str(key), _mesh_options(tab)
-    name = value if options == MeshOptions() else f"{value} (scale {options.scale:g}, up {options.up})"
-    if name not in meshes:
+def mesh_key(value: str, options: MeshOptions) -> str:
+    """The one name a mesh is known by in a scene's `meshes` (and a session's embedded meshes): the task's value, with its
+    scale and up axis when they are not the defaults (one file placed two ways is two meshes)."""
+    return value if options == MeshOptions() else f"{value} (scale {options.scale:g}, up {options.up})"
+
+
+def _mesh(tab: Table, key: str, base: Path, meshes: dict[str, trimesh.Trimesh], limits: SizeLimits,
+          embedded: str | None) -> trimesh.Trimesh:
+    """The mesh a field names, scaled and turned upright by the table's options: from `meshes` when it holds it, else
+    from its file; a fault in the file is reported at the task's field, naming the mesh file. A replayed session's
+    meshes (`embedded` names the file holding them) are only looked up, never read from the disk, and pass the checks
+    a mesh file passes."""
+    value = tab.str(key)
+    name = mesh_key(value, _mesh_options(tab))
+    if embedded is not None:
+        if name not in meshes:
+            raise tab.error(key, f"the mesh {name!r} is not embedded in the session's {embedded}; a session reads no mesh file")
+        try:
+            checked_mesh(meshes[name], f"{embedded} ({name!r})", limits, None)
+        except InputError as exc:
+            raise tab.error(key, f"the embedded {limits.what} mesh in {exc}") from exc
+    elif name not in meshes:
         path = BUILTIN_OBJECTS.get(value) or _path(tab, key, base, ASSETS / "objects")
         try:
-            meshes[name] = load_mesh(path, limits, options)
+            meshes[name] = load_mesh(path, limits, _mesh_options(tab))
         except InputError as exc:
             raise tab.error(key, f"the {limits.what} mesh {exc}") from exc
     return meshes[name]
@@ -117,7 +135,7 @@ def _color(tab: Table) -> tuple[int, int, int]:
     return tuple(int(c) for c in color)
 
 
-def _obstacle(tab: Table, base: Path, meshes: dict[str, trimesh.Trimesh]) -> Obstacle:
+def _obstacle(tab: Table, base: Path, meshes: dict[str, trimesh.Trimesh], embedded: str | None) -> Obstacle:
     shape = tab.str("shape")
     if shape not in SHAPES:
         raise tab.error("shape", f"expected one of {', '.join(SHAPES)}, got '{shape}'")
@@ -126,13 +144,22 @@ def _obstacle(tab: Table, base: Path, meshes: dict[str, trimesh.Trimesh]) -> Obs
     if shape == "mesh":
         tab.str("mesh")  # a missing mesh is named before the keys a primitive would have
         tab.check_keys({"name", "shape", "xyz", "rpy", "color", "mesh", "scale", "up"})
-        mesh = _mesh(tab, "mesh", base, meshes, OBSTACLE_LIMITS)
+        mesh = _mesh(tab, "mesh", base, meshes, OBSTACLE_LIMITS, embedded)
     else:
         tab.check_keys({"name", "shape", "size", "xyz", "rpy", "color"})
         size = tuple(tab.vector("size", SHAPES[shape]).tolist())
         if min(size) <= 0 or max(size) > OBSTACLE_LIMITS.high:
             raise tab.error("size", f"expected positive dimensions up to {OBSTACLE_LIMITS.high:g} m (metres), got {list(size)}")
     return Obstacle(tab.str("name"), shape, size, _pose(tab), _color(tab), mesh)
+
+
+def _description(root: Table) -> str:
+    """The task's description: a string of at most MAX_DESCRIPTION characters (empty when absent)."""
+    value = root.data.get("description", "")
+    if not isinstance(value, str) or len(value) > MAX_DESCRIPTION:
+        what = f"{len(value):,} characters" if isinstance(value, str) else type(value).__name__
+        raise root.error("description", f"expected a text of at most {MAX_DESCRIPTION:,} characters, got {what}")
+    return value
 
 
 def _configuration(tab: Table, robot: Robot) -> np.ndarray:
@@ -153,11 +180,13 @@ def _configuration(tab: Table, robot: Robot) -> np.ndarray:
 
 
 def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None = None,
-                    meshes: dict[str, trimesh.Trimesh] | None = None, field_prefix: str = "") -> Scene:
-    """Build a Scene from parsed task data.
+                    meshes: dict[str, trimesh.Trimesh] | None = None, field_prefix: str = "",
+                    embedded: str | None = None) -> Scene:
+    """Build a Scene from parsed task data (`meshes`: meshes already loaded, by `mesh_key`).
 
-    A replayed session passes the robot spec and the meshes it embedded (`robot_path`, `meshes`),
-    and `field_prefix` so errors name the field inside the session file.
+    A replayed session passes the robot spec and the meshes it embedded (`robot_path`, `meshes`, and `embedded`, the
+    name of the file holding them: no other mesh is read), and `field_prefix` so errors name the field inside the
+    session file.
     """
     root = Table(data, source, field_prefix)
     root.check_keys({"name", "description", "robot", "object", "obstacles", "robot_initial", "robot_final", "handover"})
@@ -167,19 +196,19 @@ def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None 
     obj = root.table("object")
     obj.check_keys({"mesh", "initial", "final", "scale", "up"})
     mesh_name = obj.str("mesh")
-    object_mesh = _mesh(obj, "mesh", base, meshes, OBJECT_LIMITS)
+    object_mesh = _mesh(obj, "mesh", base, meshes, OBJECT_LIMITS, embedded)
     obstacle_tables = root.tables("obstacles") if root.has("obstacles") else []
     if len(obstacle_tables) > MAX_OBSTACLES:
         raise root.error("obstacles", f"{len(obstacle_tables):,} obstacles, more than the {MAX_OBSTACLES} allowed "
                                       "(every collision check tests each one); merge small parts into mesh obstacles")
-    obstacles = tuple(_obstacle(t, base, meshes) for t in obstacle_tables)
+    obstacles = tuple(_obstacle(t, base, meshes, embedded) for t in obstacle_tables)
     names = [o.name for o in obstacles]
     if len(set(names)) != len(names):
         raise root.error("obstacles", "obstacle names must be unique")
     return Scene(
         source=source,
         name=root.str("name"),
-        description=data.get("description", ""),
+        description=_description(root),
         task=copy.deepcopy(data),
         robot=robot,
         environment=obstacles,

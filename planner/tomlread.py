@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import math
+import re
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -9,19 +11,39 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
+from .results import MAX_DEPTH, MAX_INT_DIGITS, check_nesting
 
 
 def load_toml(path: Path) -> dict[str, Any]:
-    """Parse a TOML file, turning a missing file or a syntax error into an InputError."""
+    """Parse a TOML file (the one TOML reader: tasks, suites, robot specs), turning a missing file, a syntax error,
+    nesting deeper than MAX_DEPTH or an integer longer than MAX_INT_DIGITS into an InputError naming the file (and the field)."""
     if not path.is_file():
         raise InputError(path, None, "file not found")
     try:
         with path.open("rb") as f:
-            return tomllib.load(f)
+            data = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(path, None, f"not valid TOML ({exc})") from exc
     except UnicodeDecodeError as exc:
         raise InputError(path, None, "not a UTF-8 text file") from exc
+    except RecursionError as exc:
+        raise InputError(path, None, f"nested deeper than Python can parse; expected at most {MAX_DEPTH} levels") from exc
+    except ValueError as exc:  # an integer of more than 4300 digits, which Python refuses to convert
+        raise InputError(path, _long_integer(path.read_text()), f"an integer of more than {sys.get_int_max_str_digits()} "
+                                                                 f"digits; expected at most {MAX_INT_DIGITS} digits") from exc
+    check_nesting(data, path)
+    return data
+
+
+def _long_integer(text: str) -> str | None:
+    """The key (and line) of the first integer of more than MAX_INT_DIGITS digits in TOML text, if any."""
+    found = re.search(rf"\d[\d_]{{{MAX_INT_DIGITS},}}", text)
+    if found is None:
+        return None
+    start = text.rfind("\n", 0, found.start()) + 1
+    line = text.count("\n", 0, found.start()) + 1
+    key, sep, _ = text[start:found.start()].partition("=")
+    return f"{key.strip()} (line {line})" if sep and key.strip() else f"line {line}"
 
 
 class Table:

@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from ..errors import InputError, RegraspError
-from ..results import atomic_write_text, read_json_object, writing
+from ..results import atomic_write_text, not_a_link, read_json_object, writing
+from ..session import checked_seconds, typed
 from .generate import GeneratedTask, generate_tasks, load_generated
 from .job import JobResult, TaskJob, TaskOutcome, write_session
 from .spec import SuiteSpec
@@ -49,6 +50,7 @@ class SuiteRun:
 def _prepare(folder: Path, spec: SuiteSpec, until: str | None, resume: bool, force: bool) -> dict[str, Any] | None:
     """The manifest of the suite to resume, or None for a fresh start (an existing suite removed only with `force`)."""
     manifest = folder / MANIFEST
+    _refuse_links(folder)
     if manifest.exists():
         if resume:
             data = read_json_object(manifest)
@@ -73,16 +75,41 @@ def _prepare(folder: Path, spec: SuiteSpec, until: str | None, resume: bool, for
     return None
 
 
+NUMBER_OR_NONE = (int, float, type(None))
+OUTCOME_TYPES = {"id": str, "success": bool, "failed_step": str, "failed_stage": str, "message": str, "steps": list,
+                 "double_grasps": (int, type(None)), "motion_duration": NUMBER_OR_NONE, "path_length": NUMBER_OR_NONE}
+
+
+def _refuse_links(folder: Path) -> None:
+    """The suite's own folders and what they hold must not be symbolic links (as a session's files must not): a resume
+    or --force would read or write where they point."""
+    for name in FOLDERS:
+        sub = not_a_link(folder / name, "a suite's folders and their files must be plain ones inside it")
+        for entry in sub.iterdir() if sub.is_dir() else ():
+            not_a_link(entry, "a suite's folders and their files must be plain ones inside it")
+
+
 def _finished(folder: Path, task: GeneratedTask) -> TaskRecord | None:
-    """A task's record from results/, or None when it has not finished (or its record cannot be read: it runs again)."""
+    """A task's record from results/, or None when it has not finished; a record of the wrong shape or types is an
+    InputError naming the file and the field (delete it to run the task again)."""
     path = folder / "results" / f"{task.id}.json"
     if not path.is_file():
         return None
-    try:
-        data = read_json_object(path)
-        return TaskRecord(task, TaskOutcome(**{**data["outcome"], "steps": tuple(data["outcome"]["steps"])}), dict(data["seconds"]))
-    except (RegraspError, KeyError, TypeError):
-        return None
+    data = read_json_object(path)
+    outcome = typed(data.get("outcome"), dict, path, "outcome", "the task's outcome as an object")
+    for key in sorted(set(outcome) | set(OUTCOME_TYPES)):
+        if key not in OUTCOME_TYPES or key not in outcome:
+            raise InputError(path, f"outcome.{key}", "missing field" if key in OUTCOME_TYPES else "unknown field")
+        kinds = OUTCOME_TYPES[key] if isinstance(OUTCOME_TYPES[key], tuple) else (OUTCOME_TYPES[key],)
+        typed(outcome[key], kinds, path, f"outcome.{key}", " or ".join("null" if k is type(None) else k.__name__ for k in kinds))
+    if outcome["id"] != task.id:
+        raise InputError(path, "outcome.id", f"expected {task.id!r}, the task the file is named after")
+    for i, step in enumerate(outcome["steps"]):
+        typed(step, str, path, f"outcome.steps[{i}]", "a step name")
+    seconds = typed(data.get("seconds"), dict, path, "seconds", "each step's seconds as an object")
+    for step, value in seconds.items():
+        checked_seconds(value, path, f"seconds.{step}")
+    return TaskRecord(task, TaskOutcome(**{**outcome, "steps": tuple(outcome["steps"])}), dict(seconds))
 
 
 def _job(folder: Path, task: GeneratedTask, spec: SuiteSpec, until: str | None) -> TaskJob:
