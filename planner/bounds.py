@@ -55,5 +55,6 @@ SEED = Bound(0, 2**64 - 1, "")  # a session seed: what numpy's SeedSequence take
 def seed_problem(value: Any) -> str:
     """What is wrong with a session seed ('' when it is a whole number in SEED's range)."""
     if isinstance(value, bool) or not isinstance(value, int):
-        return f"expected a seed (a whole number) {SEED.describe()}, got {value!r}"
+        shown = repr(value) if len(repr(value)) <= 40 else f"a {type(value).__name__} of {len(repr(value))} characters"
+        return f"expected a seed (a whole number) {SEED.describe()}, got {shown}"
     return SEED.problem(value, "expected a seed")

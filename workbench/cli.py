@@ -408,7 +408,8 @@ def parser() -> argparse.ArgumentParser:
     pl.add_argument("--resume", action="store_true", help="continue the session in --out where it stopped")
     pl.add_argument("--force", action="store_true", help="replace an existing session in --out")
     pl.add_argument("--set", action="append", metavar="STEP.PARAM=VALUE",
-                    help="a step parameter, checked before any step runs (repeatable; `regrasp params` lists them)")
+                    help="a step parameter, checked against its range before any step runs (repeatable; `regrasp params` lists "
+                         "them with their ranges and units)")
     su = command("suite", "run every task of a suite through the pipeline (local workers or Ray) and report", _cmd_suite,
                  epilog="The folder gets suite.json, suite.csv, report.html (open it in a browser), tasks/ (the generated task "
                         "files), sessions/ (one session per task, for `regrasp replay`) and results/ (what --resume keeps).")
