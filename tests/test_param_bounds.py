@@ -199,3 +199,12 @@ def test_workbench_refuses_a_seed_out_of_range(workbench: Workbench) -> None:
     job.join(60)
     assert "Seed: expected a seed from 0 to 2**64 - 1, got -1" in panel.message.content, panel.message.content
     assert workbench.session is None, "a session was started with a seed no session can hold"
+
+
+def test_transit_paddings_below_the_roadmaps_clearances_are_a_user_error() -> None:
+    """Two steps' parameters meet here (the roadmap's recorded clearance, the motion's paddings): one line naming them."""
+    from planner.motion.validity import transit_profile
+
+    with pytest.raises(RegraspError, match=r"step 'motion': parameters transit_env_padding \(0.03 m\) and transit_self_padding "
+                                           r"\(0.015 m\) must exceed the roadmap's clearances \(0.05 m, 0 m\)"):
+        transit_profile({"env_clearance_m": 0.05, "self_clearance_m": 0.0}, 0.03, 0.015)
