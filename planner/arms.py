@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bounds import bounded
 from .collision import build_collision_model
 from .errors import RegraspError
 from .exchange import palm_waypoints
@@ -30,8 +31,8 @@ FORCE_HINT = "force the arms with --set arms.picking_arm=ARM --set arms.placing_
 
 @dataclass(frozen=True)
 class ArmsParams:
-    seeds: int = 32  # IK starts per arm and placement
-    tolerance: float = 0.02  # m: fingertip centre to the object's centre of mass
+    seeds: int = bounded(32, 1, 1000, "IK starts")  # per arm and placement
+    tolerance: float = bounded(0.02, 0.001, 0.2, "m")  # fingertip centre to the object's centre of mass
     picking_arm: str = ""  # force the picking arm (with placing_arm); empty: chosen from reachability and exchange cost
     placing_arm: str = ""
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .bounds import bounded
 from .config_score import ConfigScorer
 from .grasp_configs import ConfigSampler
 from .grasps import GraspList
@@ -35,13 +36,13 @@ from .steps import Step, StepContext, StepOutput
 
 @dataclass(frozen=True)
 class DoubleGraspParams:
-    count: int = 20  # double grasps wanted with an exchange configuration (the motion falls back down this list)
-    max_pairs: int = 40  # pairs tried, best first, before giving up
-    attempts: int = 16  # exchange configurations sampled per pair
-    position_sigma: float = 0.03  # m: object position around the best exchange node
-    rotation_sigma: float = 0.15  # rad: object orientation around the one the grasp directions give
-    torso_sigma: float = 0.1  # rad
-    hand_margin: float = 0.0  # m: the two hands on the object must be this far apart
+    count: int = bounded(20, 1, 1000, "double grasps")  # wanted with an exchange configuration (the motion falls back down this list)
+    max_pairs: int = bounded(40, 1, 10000, "pairs")  # tried, best first, before giving up
+    attempts: int = bounded(16, 1, 1000, "configurations")  # exchange configurations sampled per pair
+    position_sigma: float = bounded(0.03, 0.0, 0.5, "m")  # object position around the best exchange node
+    rotation_sigma: float = bounded(0.15, 0.0, 3.1416, "rad")  # object orientation around the one the grasp directions give
+    torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad")
+    hand_margin: float = bounded(0.0, 0.0, 0.5, "m")  # the two hands on the object must be this far apart
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from .bounds import bounded
 from .exchange_grid import PalmWaypoints, best_nodes, exchange_costs, grid_nodes
 from .hand_placement import ObstacleTest
 from .object_collision import ObjectCollision
@@ -28,10 +29,10 @@ from .task import Scene
 
 @dataclass(frozen=True)
 class ExchangeParams:
-    step: float = 0.05  # m: grid spacing
-    reach_fraction: float = 0.8  # a node is reachable within this fraction of each arm's reach
-    reach_samples: int = 1500  # arm configurations sampled to estimate an arm's reach
-    keep: int = 5  # best free nodes kept
+    step: float = bounded(0.05, 0.01, 0.5, "m")  # grid spacing
+    reach_fraction: float = bounded(0.8, 0.1, 1.0, "(fraction)")  # a node is reachable within this fraction of each arm's reach
+    reach_samples: int = bounded(1500, 10, 100000, "configurations")  # arm configurations sampled to estimate an arm's reach
+    keep: int = bounded(5, 1, 1000, "nodes")  # best free nodes kept
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,14 @@ involve e are constant, but are kept so the cost is the full distance the paper 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from .errors import RegraspError
+
+MAX_GRID_NODES = 4_000_000  # exchange grid nodes a run may hold: about 100 MB of positions, a few times that at the peak
 
 
 @dataclass(frozen=True)
@@ -23,8 +28,23 @@ class PalmWaypoints:
     place_final: np.ndarray
 
 
+def grid_shape(lower: np.ndarray, upper: np.ndarray, step: float) -> tuple[int, int, int]:
+    """Nodes per axis of the grid covering [lower, upper] at `step` (what np.arange below makes)."""
+    x, y, z = (int(np.floor((hi - lo + 1e-9) / step)) + 1 for lo, hi in zip(lower, upper))
+    return x, y, z
+
+
 def grid_nodes(lower: np.ndarray, upper: np.ndarray, step: float) -> np.ndarray:
-    """Nodes of a regular grid covering the box [lower, upper] (x fastest, then y, then z)."""
+    """Nodes of a regular grid covering the box [lower, upper] (x fastest, then y, then z); a grid of more than
+    MAX_GRID_NODES is refused before it is made, naming the smallest step that fits (the box depends on the robot)."""
+    count = math.prod(grid_shape(lower, upper, step))
+    if count > MAX_GRID_NODES:
+        fits = step
+        while math.prod(grid_shape(lower, upper, fits)) > MAX_GRID_NODES:
+            fits *= 1.05
+        size = " x ".join(f"{hi - lo:.2f}" for lo, hi in zip(lower, upper))
+        raise RegraspError(f"step 'exchange': parameter step {step:g} m makes a grid of {count:,} nodes over the {size} m box both "
+                           f"hands reach, more than the {MAX_GRID_NODES:,} a run may hold: set exchange.step to {fits:.3g} m or more")
     axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(lower, upper)]
     zz, yy, xx = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
     return np.c_[xx.ravel(), yy.ravel(), zz.ravel()]

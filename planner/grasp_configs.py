@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arm_ik import ArmIK
+from .bounds import bounded
 from .config_score import ConfigScorer, ScoreWeights
 from .forked import forked_map
 from .grasps import GraspList
@@ -33,19 +34,22 @@ from .task import Scene
 
 @dataclass(frozen=True)
 class GraspConfigParams:
-    attempts: int = 8  # body samples (IK starts) tried per grasp with the torso and the free arm near rest
-    wide_attempts: int = 16  # more starts, torso and free arm over their whole ranges, for a grasp the first ones miss
-    keep: int = 2  # a grasp stops after this many collision-free configurations; its best-scored one is kept
-    torso_sigma: float = 0.1  # rad: torso joints sampled around rest
-    free_arm_sigma: float = 0.1  # rad: the free arm's joints sampled around rest
-    position_tolerance: float = 0.002  # m: palm to its grasp pose
-    rotation_tolerance: float = 0.02  # rad
-    workers: int = 2  # processes: the two hands run in parallel
-    ik_iterations: int = 30  # per start (converging solves take ~6, 13 at the 90th percentile on the default task)
-    arm_weight: float = 1.0  # configuration score weights (config_score.py)
-    free_weight: float = 1.0
-    joint_scale: float = 0.5  # rad
-    length_scale: float = 0.1  # m
+    attempts: int = bounded(8, 1, 1000, "IK starts")  # body samples (IK starts) tried per grasp with the torso and the free arm near rest
+    # more starts, torso and free arm over their whole ranges, for a grasp the first ones miss
+    wide_attempts: int = bounded(16, 0, 1000, "IK starts")
+    # a grasp stops after this many collision-free configurations; its best-scored one is kept
+    keep: int = bounded(2, 1, 100, "configurations")
+    torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad")  # torso joints sampled around rest
+    free_arm_sigma: float = bounded(0.1, 0.0, 3.1416, "rad")  # the free arm's joints sampled around rest
+    position_tolerance: float = bounded(0.002, 1e-5, 0.05, "m")  # palm to its grasp pose
+    rotation_tolerance: float = bounded(0.02, 1e-4, 0.5, "rad")
+    workers: int = bounded(2, 1, 64, "processes")  # the two hands run in parallel
+    # per start (converging solves take ~6, 13 at the 90th percentile on the default task)
+    ik_iterations: int = bounded(30, 1, 1000, "iterations")
+    arm_weight: float = bounded(1.0, 0.0, 100.0, "(weight)")  # configuration score weights (config_score.py)
+    free_weight: float = bounded(1.0, 0.0, 100.0, "(weight)")
+    joint_scale: float = bounded(0.5, 0.01, 10.0, "rad")
+    length_scale: float = bounded(0.1, 0.001, 10.0, "m")
 
     def weights(self) -> ScoreWeights:
         return ScoreWeights(self.arm_weight, self.free_weight, self.joint_scale, self.length_scale)

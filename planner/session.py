@@ -24,6 +24,7 @@ import numpy as np
 import trimesh
 
 from . import __version__
+from .bounds import seed_problem
 from .errors import InputError, RegraspError
 from .npz import Budget, NpzFile
 from .object_mesh import MAX_FACES, check_face_count
@@ -137,8 +138,8 @@ def _short(value: Any) -> str:
 
 def _seed(value: Any, path: Path, field: str) -> int:
     typed(value, int, path, field, "an integer seed")
-    if not 0 <= value < 2**64:
-        _fail(path, field, f"expected a seed from 0 to 2**64 - 1, got {value}")
+    if seed_problem(value):  # the range `--seed` checks too
+        _fail(path, field, seed_problem(value))
     return value
 
 
@@ -258,6 +259,8 @@ class Session:
     def create(cls, folder: str | Path, scene: Scene, seed: int, force: bool = False) -> Session:
         """A new, empty session; an existing one is replaced only with `force`."""
         folder = Path(folder)
+        if seed_problem(seed):  # before any folder is made: a session nothing could reopen is never written
+            raise RegraspError(f"session seed: {seed_problem(seed)}")
         if cls.exists(folder):
             if not force:
                 raise RegraspError(f"{folder} already holds a session; use --resume to continue it, or --force to replace it")

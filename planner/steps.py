@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .bounds import Bound, field_bound
 from .errors import InputError, RegraspError
 from .results import MAX_DEPTH, check_nesting, parse_json, read_only
 from .task import Scene
@@ -84,20 +85,28 @@ class Step:
             names = ", ".join(sorted(known)) or "none"
             raise RegraspError(f"step '{self.name}' has no parameter {', '.join(sorted(unknown))} (parameters: {names})")
         defaults = self.params()
+        bounds = param_bounds(self.params)
         for name, value in values.items():
             expected = type(getattr(defaults, name))
-            if expected is float and isinstance(value, int) and not isinstance(value, bool):
-                value = float(value)
-            if not isinstance(value, expected) or (expected is int and isinstance(value, bool)):
+            accepted = (int, float) if expected is float else expected  # a float parameter takes a whole number too
+            if not isinstance(value, accepted) or (expected is not bool and isinstance(value, bool)):
                 raise RegraspError(f"step '{self.name}': parameter {name} expects {expected.__name__}, got {value!r}")
-            if expected is float and not math.isfinite(value):
+            if isinstance(value, float) and not math.isfinite(value):
                 raise RegraspError(f"step '{self.name}': parameter {name} expects a finite number, got {value!r}")
-            values[name] = value
+            out_of_range = bounds[name].problem(value, "expects a value") if name in bounds else ""
+            if out_of_range:  # checked before float(): a huge whole number is out of range, never an OverflowError
+                raise RegraspError(f"step '{self.name}': parameter {name} {out_of_range}")
+            values[name] = expected(value)
         params = dataclasses.replace(defaults, **values)
         problem = params.problem() if hasattr(params, "problem") else ""  # a step's own constraints between values
         if problem:
             raise RegraspError(f"step '{self.name}': parameter {problem}")
         return params
+
+
+def param_bounds(params: type) -> dict[str, Bound]:
+    """The range and unit each numeric parameter of a step's parameter dataclass declares (see bounds.py)."""
+    return {f.name: bound for f in dataclasses.fields(params) if (bound := field_bound(f)) is not None}
 
 
 def step_seed(seed: int, name: str) -> int:

@@ -185,6 +185,20 @@ def positive_int(text: str) -> int:
     return value
 
 
+def seed_argument(text: str) -> int:
+    """argparse type of --seed: a whole number in the range a session file accepts (checked before any folder is made)."""
+    from planner.bounds import seed_problem
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = text
+    problem = seed_problem(value)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
+    return value
+
+
 def suite_argument(text: str) -> Path:
     """argparse type of SUITE: a suite file, or a name in assets/suites/."""
     from planner.suite.spec import find_suite
@@ -196,14 +210,17 @@ def suite_argument(text: str) -> Path:
 
 
 def params_text() -> str:
-    """Every pipeline step's parameters with their types and defaults, as `regrasp params` prints them."""
+    """Every pipeline step's parameters with their types, defaults, ranges and units, as `regrasp params` prints them."""
     from planner.pipeline import PIPELINE
+    from planner.steps import param_bounds
 
     lines = []
     for step in PIPELINE:
-        defaults = step.params()
+        defaults, bounds = step.params(), param_bounds(step.params)
         lines.append(f"{step.name}: {step.summary}")
-        lines += [f"  {step.name}.{f.name:<22} {f.type:<6} default {getattr(defaults, f.name)!r}" for f in dataclasses.fields(step.params)]
+        for f in dataclasses.fields(step.params):
+            default, bound = f"default {getattr(defaults, f.name)!r}", bounds.get(f.name)
+            lines.append(f"  {step.name}.{f.name:<22} {f.type:<6} {default:<16} {bound.describe() if bound else ''}".rstrip())
         lines.append("")
     lines.append("Set one with `regrasp plan TASK --out DIR --set STEP.PARAM=VALUE` (the value is read as JSON, else as a string).")
     return "\n".join(lines)
@@ -240,13 +257,13 @@ def _cmd_screenshot(args: argparse.Namespace) -> int:
 def _cmd_roadmap(args: argparse.Namespace) -> int:
     import time
 
-    from planner.roadmap import RoadmapParams, roadmap_for
+    from planner.roadmap import roadmap_for
     from planner.roadmap.result import render_stats
     from planner.roadmap.step import session_roadmap_seed
     from planner.task import load_task
 
+    params = _option_params("--nodes", "roadmap", {"nodes": args.nodes, "tree": args.tree})
     scene = load_task(args.task)
-    params = RoadmapParams(nodes=args.nodes, tree=args.tree)
     start = time.perf_counter()
     with Bars() as bars:
         roadmap, seconds = roadmap_for(scene, params, session_roadmap_seed(args.seed), not args.no_cache, bars.start("roadmap"))
@@ -267,10 +284,9 @@ def _cmd_grasps(args: argparse.Namespace) -> int:
 
     from planner.grasps import GraspParams, grasp_list, session_grasp_seed
 
+    frames = {} if args.frames is None else {"orientations": math.ceil(args.frames / GraspParams().positions)}
+    params = _option_params("--frames", "pick_grasps", frames)
     robot_spec, mesh, what = _grasp_inputs(args)
-    params = GraspParams()
-    if args.frames is not None:
-        params = dataclasses.replace(params, orientations=max(1, math.ceil(args.frames / params.positions)))
     start = time.perf_counter()
     with Bars() as bars:
         progress = bars.start(f"{args.hand} grasps")
@@ -289,6 +305,16 @@ def _cmd_grasps(args: argparse.Namespace) -> int:
         print(f"error: {result.failure}", file=sys.stderr)
         return 1
     return 0
+
+
+def _option_params(option: str, step: str, values: dict[str, Any]) -> Any:
+    """A step's parameters set by a command's option, checked against their ranges before anything loads or runs."""
+    from planner.pipeline import step_named
+
+    try:
+        return step_named(step).make_params(values)
+    except RegraspError as exc:
+        raise RegraspError(f"{option}: {exc}") from exc
 
 
 def _grasp_inputs(args: argparse.Namespace) -> tuple[RobotSpec, trimesh.Trimesh, str]:
@@ -377,12 +403,13 @@ def parser() -> argparse.ArgumentParser:
     pl = command("plan", "run the pipeline headless into a session folder", _cmd_plan, epilog=_pipeline_epilog())
     _add_task(pl)
     pl.add_argument("--out", required=True, metavar="DIR", help="session folder to write")
-    pl.add_argument("--seed", type=int, default=0, help="session seed (each step's generator is derived from it)")
+    pl.add_argument("--seed", type=seed_argument, default=0, help="session seed (each step's generator is derived from it)")
     pl.add_argument("--until", metavar="STEP", help="last step to run, e.g. double-grasps (default: every step)")
     pl.add_argument("--resume", action="store_true", help="continue the session in --out where it stopped")
     pl.add_argument("--force", action="store_true", help="replace an existing session in --out")
     pl.add_argument("--set", action="append", metavar="STEP.PARAM=VALUE",
-                    help="a step parameter, checked before any step runs (repeatable; `regrasp params` lists them)")
+                    help="a step parameter, checked against its range before any step runs (repeatable; `regrasp params` lists "
+                         "them with their ranges and units)")
     su = command("suite", "run every task of a suite through the pipeline (local workers or Ray) and report", _cmd_suite,
                  epilog="The folder gets suite.json, suite.csv, report.html (open it in a browser), tasks/ (the generated task "
                         "files), sessions/ (one session per task, for `regrasp replay`) and results/ (what --resume keeps).")
@@ -396,7 +423,7 @@ def parser() -> argparse.ArgumentParser:
     su.add_argument("--until", metavar="STEP", help="last step of every task, e.g. double-grasps (default: every step, through motion)")
     su.add_argument("--resume", action="store_true", help="continue the suite in --out: finished tasks are kept, the others run")
     su.add_argument("--force", action="store_true", help="replace an existing suite in --out")
-    command("params", "list every step's parameters with their types and defaults", _cmd_params)
+    command("params", "list every step's parameters with their types, defaults, ranges and units", _cmd_params)
     r = command("replay", "open the workbench on a saved session (nothing is recomputed)", _cmd_replay)
     r.add_argument("session", metavar="SESSION", help="session folder")
     _add_server(r)
@@ -408,8 +435,8 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default=str(SCREENSHOT), metavar="PNG", help="image to write")
     rm = command("roadmap", "build (or load from the cache) the offline roadmap and print its statistics", _cmd_roadmap)
     _add_task(rm)
-    rm.add_argument("--nodes", type=int, default=50, help="nodes per elementary roadmap")
-    rm.add_argument("--seed", type=int, default=0, help="session seed (the same roadmap as a session with this seed)")
+    rm.add_argument("--nodes", type=int, default=50, help="nodes per elementary roadmap (roadmap.nodes: `regrasp params` gives its range)")
+    rm.add_argument("--seed", type=seed_argument, default=0, help="session seed (the same roadmap as a session with this seed)")
     rm.add_argument("--tree", action="store_true", help="the tree variant: SG edges only between different components")
     rm.add_argument("--no-cache", action="store_true", help="rebuild even when a cached roadmap exists")
     _add_json(rm, "the statistics")
@@ -418,26 +445,26 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--robot", metavar="SPEC", help="robot spec (with --object, instead of TASK)")
     g.add_argument("--object", metavar="MESH", help="object mesh file, or 'statuette' (with --robot)")
     g.add_argument("--hand", required=True, help="the arm whose hand grasps, e.g. right or left")
-    g.add_argument("--frames", type=int, help="about this many grasp frames (positions x orientations; default: the step's)")
-    g.add_argument("--seed", type=int, default=0, help="session seed: the list `plan --seed` computes (and caches) for the hand")
+    g.add_argument("--frames", type=positive_int, help="about this many grasp frames (positions x orientations; default: the step's)")
+    g.add_argument("--seed", type=seed_argument, default=0, help="session seed: the list `plan --seed` computes (and caches) for the hand")
     g.add_argument("--no-cache", action="store_true", help="recompute even when a cached list exists")
     _add_json(g, "the list")
     b = sub.add_parser("bench", help="benchmarks, printed as tables", description="Benchmarks, printed as tables.", formatter_class=_Help)
     bsub = b.add_subparsers(dest="what", required=True, metavar="WHAT")
     bc = command("collision", "collision checking and forward kinematics timings", _cmd_bench, parent=bsub)
     _add_task(bc)
-    bc.add_argument("--samples", type=int, default=2000, help="random configurations timed")
-    bc.add_argument("--seed", type=int, default=0, help="seed of the configurations")
+    bc.add_argument("--samples", type=positive_int, default=2000, help="random configurations timed")
+    bc.add_argument("--seed", type=seed_argument, default=0, help="seed of the configurations")
     _add_json(bc, "the figures")
     bd = command("double-grasps", "grasp configurations, exchange position and double grasps, timed over runs", _cmd_bench_double_grasps,
                  parent=bsub)
     _add_task(bd)
-    bd.add_argument("--seed", type=int, default=0, help="session seed")
-    bd.add_argument("--repeat", type=int, default=5, help="runs timed")
+    bd.add_argument("--seed", type=seed_argument, default=0, help="session seed")
+    bd.add_argument("--repeat", type=positive_int, default=5, help="runs timed")
     _add_json(bd, "the figures")
     bm = command("motion", "Table I: the motion over seeds with the Super Graph and with RRTConnect alone", _cmd_bench_motion, parent=bsub)
     _add_task(bm)
-    bm.add_argument("--seeds", type=int, default=10, help="online seeds 0..N-1 (the grasp lists and roadmap: seed 0, cached)")
+    bm.add_argument("--seeds", type=positive_int, default=10, help="online seeds 0..N-1 (the grasp lists and roadmap: seed 0, cached)")
     bm.add_argument("--repeat", type=positive_int, default=1, metavar="K",
                     help="plan each seed K times and keep its fastest run (the motion is the same each time; on a busy "
                          "machine the fastest is the steadiest figure)")

@@ -7,7 +7,7 @@ from typing import Any
 
 import viser
 
-from planner.steps import Step
+from planner.steps import Step, param_bounds
 
 EDITABLE = (bool, int, float, str)
 
@@ -23,32 +23,36 @@ def recorded_params(step: Step, recorded: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def whole(value: Any) -> Any:
+    """A number input's whole value as an int (it may arrive as 8.0); anything else as it came, for the range check to judge."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
 class ParamInputs:
-    """One input per editable field of `step`'s parameters, starting at `values` (else the defaults)."""
+    """One input per editable field of `step`'s parameters, starting at `values` (else the defaults); a number's limits and
+    hint (range and unit) are those its parameter declares (planner/bounds.py), as `--set` and `regrasp params` use them."""
 
     def __init__(self, gui: viser.GuiApi, step: Step, values: Mapping[str, Any] | None = None):
         self.step = step
         params = step.make_params(recorded_params(step, values or {}))
+        bounds, defaults = param_bounds(step.params), step.params()
         self.handles: dict[str, Any] = {}
         for f in dataclasses.fields(params):
-            value = getattr(params, f.name)
+            value, bound = getattr(params, f.name), bounds.get(f.name)
+            hint = f"{bound.describe()}; default {getattr(defaults, f.name)!r}" if bound else None
+            limits = {"min": bound.low, "max": bound.high} if bound else {}
             if isinstance(value, bool):
                 self.handles[f.name] = gui.add_checkbox(f.name, value)
             elif isinstance(value, int):
-                self.handles[f.name] = gui.add_number(f.name, value, step=1)
+                self.handles[f.name] = gui.add_number(f.name, value, step=1, hint=hint, **limits)
             elif isinstance(value, float):
-                self.handles[f.name] = gui.add_number(f.name, value, step=abs(value) / 10 or 0.01)
+                self.handles[f.name] = gui.add_number(f.name, value, step=abs(value) / 10 or 0.01, hint=hint, **limits)
             elif isinstance(value, str):
                 self.handles[f.name] = gui.add_text(f.name, value)
 
     def values(self) -> dict[str, Any]:
-        """The edited values, each of its field's type."""
-        defaults = self.step.params()
-        out = {}
-        for name, handle in self.handles.items():
-            expected = type(getattr(defaults, name))
-            out[name] = int(round(handle.value)) if expected is int else expected(handle.value)
-        return out
+        """The edited values as the inputs hold them (a whole number as an int): `Step.make_params` checks them."""
+        return {name: whole(handle.value) for name, handle in self.handles.items()}
 
     def remove(self) -> None:
         for handle in self.handles.values():

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import viser
 
+from planner.bounds import SEED, seed_problem
 from planner.errors import RegraspError
 from planner.pipeline import PIPELINE, step_named, steps_until
 from planner.runner import ProgressFactory, run_pipeline
@@ -25,7 +26,7 @@ from planner.steps import Progress, Step
 from .export import scene_html
 from .layers.base import Pose
 from .notify import error_text, notify_all
-from .param_inputs import ParamInputs, recorded_params
+from .param_inputs import ParamInputs, recorded_params, whole
 from .session_layers import SessionLayers
 from .session_store import (
     check_name,
@@ -72,7 +73,7 @@ class SessionPanel:
             self.save_button = gui.add_button("Save", hint="Save the current session as sessions/<name>")
             self.saved = gui.add_dropdown("Saved", self._saved_options())
             self.load_button = gui.add_button("Load", hint="Replay a saved session: nothing is recomputed")
-            self.seed = gui.add_number("Seed", 0, step=1, hint="The seed of a session started here")
+            self.seed = gui.add_number("Seed", 0, min=SEED.low, step=1, hint=f"The seed of a session started here ({SEED.describe()})")
             self.next_button = gui.add_button("Run the next step")
             self.until = gui.add_dropdown("Up to", names, initial_value=names[-1])
             self.until_button = gui.add_button("Run up to this step")
@@ -271,6 +272,7 @@ class SessionPanel:
             return None
         try:
             base = check_name(self.name.value) if session.folder == self._scratch else session.folder.name
+            step_named(step).make_params(values)  # the edited values in their declared ranges, before any folder is made
         except RegraspError as exc:
             self._say("Not re-run", str(exc), error=True)
             return None
@@ -297,7 +299,13 @@ class SessionPanel:
         session = self.wb.session
         if session is not None and session.folder == self._scratch:
             return session
-        new = Session.create(scratch_folder(), self.wb.scene, int(self.seed.value)) if session is None else scratch_copy(session)
+        if session is None:
+            seed = whole(self.seed.value)
+            if seed_problem(seed):  # refused before the scratch folder is made
+                raise RegraspError(f"Seed: {seed_problem(seed)}")
+            new = Session.create(scratch_folder(), self.wb.scene, seed)
+        else:
+            new = scratch_copy(session)
         self._scratch = new.folder
         return new
 

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..bounds import bounded
 from ..results import array
 
 PHASES = ("Grasp", "Carry", "Place", "Rest")
@@ -16,46 +17,57 @@ PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "cont
 @dataclass(frozen=True)
 class MotionParams:
     planner: str = "roadmap"  # 'roadmap' (Super Graph, lazy revalidation, RRT reconnection) or 'rrt' (RRTConnect alone: the baseline)
-    pregrasp_distance: float = 0.06  # m: a hand backs off this far along its approach direction before it approaches
-    lift: float = 0.06  # m: the object is lifted off and set down by this much (or twice), vertically where that is free
-    lift_candidates: int = 8  # lift and set-down motions tried, freest first
-    preshape: float = 1.0  # fingers before an approach: this fraction of the way from the grasp to the open hand
-    release: float = 0.6  # fingers letting go: this fraction of the way open before the hand retreats (then fully open)
-    straight_steps: int = 4  # IK waypoints on each straight hand motion
-    max_velocity: float = 1.0  # rad/s: joint speeds are capped here (and by the robot's own limits)
-    max_acceleration: float = 2.0  # rad/s^2
-    rate: float = 30.0  # Hz: the trajectory's sampling rate
-    connections: int = 4  # transit: edges joining each end to the graph, nearest valid nodes first (checked until one is
-    # valid; the rest when a path takes them) ...
-    max_connections: int = 48  # ... among at most this many nearest nodes tried
-    max_searches: int = 60  # transit: graph searches after invalidations before reconnecting
-    max_reconnections: int = 2  # transit: RRTConnect calls per query (then the next candidate end is tried) ...
-    phase_reconnections: int = 4  # ... and per phase, over all its queries (then they search the graph only: a double
-    # grasp whose transit cannot be found gives up after a few seconds instead of reconnecting to every candidate end)
-    reconnect_motions: int = 1000  # motion checks one RRTConnect reconnection may make (a budget in checks, unlike one in
-    # seconds, gives the same result on any machine)
-    rrt_motions: int = 20000  # motion checks one RRTConnect query of the baseline planner ('rrt') may make
-    rrt_step: float = 0.5  # rad: RRTConnect's range (longest extension, joint-space distance)
-    shortcut_attempts: int = 0  # random shortcuts per transit, after the greedy ones between its vertices (measured on
-    # seeds 0-9: 16 of them shortened the joint-space length by a sixth and the duration by 4%, for 10% more checks)
-    shortcut_min_gain: float = 0.1  # rad: a shortcut shortening the path (joint-space length) by less is not checked
-    goal_nodes: int = 16  # transit: an end the graph cannot reach is reconnected to this many of its nearest valid nodes
-    max_double_grasps: int = 20  # double grasps tried, best first
-    transit_env_padding: float = 0.03  # m: transit checks: obstacles count as hit this close (clearance: the roadmap's),
-    transit_self_padding: float = 0.015  # m: robot-robot and robot-object pairs likewise (both lowered per transit,
-    # pair by pair, to what its two ends allow)
-    contact_env_padding: float = 0.008  # m: contact motions (approach, closing, lift ...) keep obstacles this far at checks
-    contact_env_clearance: float = 0.004  # m: ... and this far between checks
-    contact_penetration: float = 0.001  # m: hand-object pairs touch at most (0 at checks, this deep between checks)
-    contact_coarse: int = 3  # contact motions are checked first at every this-many-th configuration with margins this many
-    # times wider, densely only next to one that comes closer: the same guarantee in fewer checks (1: densely throughout)
+    pregrasp_distance: float = bounded(0.06, 0.0, 0.5, "m")  # a hand backs off this far along its approach direction before it approaches
+    # the object is lifted off and set down by this much (or twice), vertically where that is free
+    lift: float = bounded(0.06, 0.001, 0.5, "m")
+    lift_candidates: int = bounded(8, 1, 100, "motions")  # lift and set-down motions tried, freest first
+    # fingers before an approach: this fraction of the way from the grasp to the open hand
+    preshape: float = bounded(1.0, 0.0, 1.0, "(fraction)")
+    # fingers letting go: this fraction of the way open before the hand retreats (then fully open)
+    release: float = bounded(0.6, 0.0, 1.0, "(fraction)")
+    straight_steps: int = bounded(4, 1, 100, "waypoints")  # IK waypoints on each straight hand motion
+    max_velocity: float = bounded(1.0, 0.01, 20.0, "rad/s")  # joint speeds are capped here (and by the robot's own limits)
+    max_acceleration: float = bounded(2.0, 0.01, 100.0, "rad/s^2")
+    rate: float = bounded(30.0, 1.0, 1000.0, "Hz")  # the trajectory's sampling rate
+    # transit: edges joining each end to the graph, nearest valid nodes first (checked until one is valid; the rest when a path takes
+    # them) ...
+    connections: int = bounded(4, 1, 100, "edges")
+    max_connections: int = bounded(48, 1, 1000, "nodes")  # ... among at most this many nearest nodes tried
+    max_searches: int = bounded(60, 1, 10000, "searches")  # transit: graph searches after invalidations before reconnecting
+    max_reconnections: int = bounded(2, 0, 100, "calls")  # transit: RRTConnect calls per query (then the next candidate end is tried) ...
+    # ... and per phase, over all its queries (then they search the graph only: a double grasp whose transit cannot be found gives up
+    # after a few seconds instead of reconnecting to every candidate end)
+    phase_reconnections: int = bounded(4, 0, 1000, "calls")
+    # motion checks one RRTConnect reconnection may make (a budget in checks, unlike one in seconds, gives the same result on any machine)
+    reconnect_motions: int = bounded(1000, 1, 1000000, "motion checks")
+    rrt_motions: int = bounded(20000, 1, 1000000, "motion checks")  # checks one RRTConnect query of the baseline planner ('rrt') may make
+    rrt_step: float = bounded(0.5, 0.01, 10.0, "rad")  # RRTConnect's range (longest extension, joint-space distance)
+    # random shortcuts per transit, after the greedy ones between its vertices (measured on seeds 0-9: 16 of them shortened the
+    # joint-space length by a sixth and the duration by 4%, for 10% more checks)
+    shortcut_attempts: int = bounded(0, 0, 10000, "shortcuts")
+    shortcut_min_gain: float = bounded(0.1, 0.0, 10.0, "rad")  # a shortcut shortening the path (joint-space length) by less is not checked
+    # transit: an end the graph cannot reach is reconnected to this many of its nearest valid nodes
+    goal_nodes: int = bounded(16, 1, 1000, "nodes")
+    max_double_grasps: int = bounded(20, 1, 1000, "double grasps")  # tried, best first
+    # transit checks: obstacles count as hit this close (clearance: the roadmap's), robot-robot and robot-object pairs at
+    # transit_self_padding likewise (both lowered per transit, pair by pair, to what its two ends allow)
+    transit_env_padding: float = bounded(0.03, 0.001, 0.2, "m")
+    transit_self_padding: float = bounded(0.015, 0.001, 0.2, "m")
+    # contact motions (approach, closing, lift ...) keep obstacles this far at checks
+    contact_env_padding: float = bounded(0.008, 0.001, 0.05, "m")
+    contact_env_clearance: float = bounded(0.004, 0.0, 0.05, "m")  # ... and this far between checks
+    contact_penetration: float = bounded(0.001, 1e-5, 0.01, "m")  # hand-object pairs touch at most (0 at checks, this deep between checks)
+    # contact motions are checked first at every this-many-th configuration with margins this many times wider, densely only next to
+    # one that comes closer: the same guarantee in fewer checks (1: densely throughout)
+    contact_coarse: int = bounded(3, 1, 100, "(factor)")
 
     def problem(self) -> str:
         """What is wrong with the values, naming the parameter ('' when nothing): checked before the step runs."""
         if self.planner not in PLANNERS:
             return f"planner must be one of {', '.join(PLANNERS)}, got '{self.planner}'"
-        if self.contact_coarse < 1:
-            return f"contact_coarse must be a whole number >= 1, got {self.contact_coarse}"
+        if self.contact_env_clearance >= self.contact_env_padding:
+            return (f"contact_env_clearance must be below contact_env_padding ({self.contact_env_padding:g} m): a padding is checked "
+                    f"so that the clearance holds between checks, got {self.contact_env_clearance:g} m")
         return ""
 
 

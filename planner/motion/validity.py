@@ -17,6 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from ..collision import CollisionChecker, CollisionModel, pair_table
+from ..errors import RegraspError
 from ..roadmap.local_planner import SegmentChecker, geometry_radii, two_level
 
 
@@ -66,7 +67,8 @@ def transit_profile(roadmap_resolution: dict, env_padding: float, self_padding: 
     r = roadmap_resolution
     env_clearance, self_clearance = float(r["env_clearance_m"]), float(r["self_clearance_m"])
     if env_padding <= env_clearance or self_padding <= self_clearance:
-        raise ValueError(f"transit paddings must exceed the roadmap's clearances ({env_clearance} m, {self_clearance} m)")
+        raise RegraspError(f"step 'motion': parameters transit_env_padding ({env_padding:g} m) and transit_self_padding "
+                           f"({self_padding:g} m) must exceed the roadmap's clearances ({env_clearance:g} m, {self_clearance:g} m)")
     return Profile("transit", env_padding, env_clearance, self_padding, self_clearance, self_padding, self_clearance)
 
 

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..bounds import bounded
 from ..results import array
 
 
@@ -12,15 +13,22 @@ from ..results import array
 class RoadmapParams:
     """How the offline roadmap is built (all part of its cache key)."""
 
-    nodes: int = 50  # nodes per elementary roadmap (Vis-PRM stops there)
-    radius: float = 3.0  # rad: a guard's visibility range (joint-space distance over a sub-system's joints)
-    max_failures: int = 300  # Vis-PRM also stops after this many useless samples in a row
-    env_padding: float = 0.03  # m: robot-obstacle pairs are checked as colliding closer than this ...
-    env_clearance: float = 0.01  # m: ... and keep this distance along every motion (the project's margin)
-    self_padding: float = 0.015  # m: robot-robot pairs are checked colliding closer than this, and keep >= 0
+    nodes: int = bounded(50, 2, 500, "nodes")  # per elementary roadmap (Vis-PRM stops there)
+    radius: float = bounded(3.0, 0.01, 20.0, "rad")  # a guard's visibility range (joint-space distance over a sub-system's joints)
+    max_failures: int = bounded(300, 1, 100000, "samples")  # Vis-PRM also stops after this many useless samples in a row
+    env_padding: float = bounded(0.03, 0.001, 0.2, "m")  # robot-obstacle pairs are checked as colliding closer than this ...
+    env_clearance: float = bounded(0.01, 0.0, 0.2, "m")  # ... and keep this distance along every motion (the project's margin)
+    self_padding: float = bounded(0.015, 0.001, 0.2, "m")  # robot-robot pairs are checked colliding closer than this, and keep >= 0
     mixed_edges: bool = False  # also SG edges whose common part switches source along two elementary edges
     one_arm_edges: bool = True  # also SG edges moving one arm along its elementary edge, the other still
     tree: bool = False  # the tree variant: SG edges only between different connected components
+
+    def problem(self) -> str:
+        """What is wrong between the values, naming the parameter ('' when nothing): checked before the step runs."""
+        if self.env_clearance >= self.env_padding:
+            return (f"env_clearance must be below env_padding ({self.env_padding:g} m): a padding is checked so that the clearance "
+                    f"holds between checks, got {self.env_clearance:g} m")
+        return ""
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ..bounds import SEED
 from ..errors import InputError, RegraspError
 from ..object_mesh import UP_AXES, MeshOptions
 from ..paths import ASSETS, named_file
@@ -213,7 +214,7 @@ def load_suite(path: str | Path) -> SuiteSpec:
         if not found:
             raise root.error(key, "expected at least one")
     return SuiteSpec(path, path.read_text(), root.str("name"), base_task.resolve(), _int(root, "tasks", 10, 1, MAX_TASKS),
-                     _int(root, "seed", 0, 0, 2**63 - 1), _int(root, "plan_seed", 0, 0, 2**63 - 1),
+                     _int(root, "seed", 0, 0, 2**63 - 1), _int(root, "plan_seed", 0, SEED.low, SEED.high),
                      _int(root, "attempts", 30, 1, MAX_ATTEMPTS), _int(root, "task_cpus", 1, 1, MAX_TASK_CPUS),
                      _timeout(root), root.bool("handover", default=True), objects,
                      regions["initial_regions"], regions["final_regions"])
