@@ -15,6 +15,7 @@ from planner.session import Session
 from planner.task import Scene
 
 from ..meshes import matrix_wxyz
+from ..text import plain
 from .arms import ARM_COLORS
 from .base import Host, StepLayer
 from .hands import HAND_STYLE, HandMeshes
@@ -147,7 +148,7 @@ class GraspsLayer(StepLayer):
         r = self.result
         assert r is not None
         rows = "\n".join(f"| {s} | {float(getattr(r, s)[rank]):.4f} |" for s in r.SCORES)
-        fingers = ", ".join(c["finger"] for c in r.contacts(rank))
+        fingers = ", ".join(plain(c["finger"]) for c in r.contacts(rank))
         return f"**Rank {rank + 1}** of {len(r)} — contacts: {fingers}\n\n| score | value |\n|---|---|\n{rows}\n\n{self.summary(r)}"
 
     def _set_spheres_visible(self, visible: bool) -> None:
