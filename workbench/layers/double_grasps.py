@@ -89,7 +89,7 @@ class DoubleGraspsLayer(StepLayer):
 
     @staticmethod
     def summary(result: DoubleGrasps) -> str:
-        return (f"{result.pairs} pairs with configurations, {result.compatible} compatible, {result.tried} tried, "
+        return (f"{plain(result.pairs)} pairs with configurations, {plain(result.compatible)} compatible, {plain(result.tried)} tried, "
                 f"{len(result)} with an exchange configuration.\n\n" + stages_markdown(result.stages, result.failure))
 
     def select(self, index: int) -> None:

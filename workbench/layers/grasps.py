@@ -141,8 +141,8 @@ class GraspsLayer(StepLayer):
 
     @staticmethod
     def summary(result: GraspList) -> str:
-        return (f"{len(result)} grasps kept of {result.frames_tried} frames tried, μ={result.mu:g}, "
-                f"{result.cone_edges} cone edges")
+        return (f"{len(result)} grasps kept of {plain(result.frames_tried)} frames tried, μ={result.mu:g}, "
+                f"{plain(result.cone_edges)} cone edges")
 
     def scores_text(self, rank: int) -> str:
         r = self.result
