@@ -185,13 +185,16 @@ def test_joint_slider_swings_the_arm(workbench: Workbench, page: Page) -> None:
         workbench.reset()
 
 
-def test_bad_task_file_shows_its_error(workbench: Workbench, page: Page, tmp_path: Path) -> None:
+def test_bad_task_file_shows_its_error(workbench: Workbench, page: Page, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "bad"\nrobot = "no_such_robot.toml"\n')
     scene = workbench.scene
     row = page.locator(".mantine-Flex-root", has=page.get_by_text("Task file", exact=True)).last
     row.locator("input").fill(str(bad))
     page.get_by_role("button", name="Load file").click()
-    page.get_by_text("Could not load the task").first.wait_for(timeout=10_000)
-    assert page.get_by_text("no_such_robot.toml").count() > 0
+    page.get_by_text("expected a .toml file in").first.wait_for(timeout=10_000)  # not a folder tasks are read from
+    monkeypatch.setattr(workbench, "task_roots", (*workbench.task_roots, tmp_path))  # as if the workbench started there
+    page.get_by_role("button", name="Load file").click()
+    page.get_by_text("no_such_robot.toml", exact=False).first.wait_for(timeout=10_000)
+    assert page.get_by_text("Could not load the task").count() > 0
     assert workbench.scene is scene, "a bad task file replaced the loaded task"

@@ -2,6 +2,7 @@
 dimmed, whole poses (the object between the hands at the exchange), camera views, and the README's picture."""
 from __future__ import annotations
 
+import html
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -74,14 +75,14 @@ def test_only_the_last_step_is_in_focus(workbench: Workbench) -> None:
     assert workbench.layer_toggles.shown() == ["motion"]
     assert [n for n, layer in layers.items() if layer.visible] == ["motion"] and not layers["roadmap"].visible
     panel = workbench.session_panel
-    assert panel.step.value == "motion" and "| path_length |" in panel.details.content
+    assert panel.step.value == "motion" and "| path_length |" in html.unescape(panel.details.content)
     rows = [row for row in panel.table.content.splitlines()[2:]]
     assert all(1 <= row.split("|")[4].count("=") <= 3 for row in rows), panel.table.content
     assert "collision_checks" not in panel.table.content  # the roadmap's many figures: in its details only
     assert workbench.task_path.value == "default" and workbench.task_choice.value == "session example"  # not …/session.json
     panel.step.value = "roadmap"
     try:
-        assert workbench.layer_toggles.shown() == ["roadmap"] and "| collision_checks |" in panel.details.content
+        assert workbench.layer_toggles.shown() == ["roadmap"] and "| collision_checks |" in html.unescape(panel.details.content)
     finally:
         panel.step.value = "motion"
 

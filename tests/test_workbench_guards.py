@@ -2,6 +2,7 @@
 task cannot be loaded while a run is going (it would be thrown away when the run ends)."""
 from __future__ import annotations
 
+import html
 import threading
 from collections.abc import Iterator
 
@@ -59,7 +60,7 @@ def test_bad_save_name_is_a_message_not_an_exception(bench: Workbench, case: str
     panel.message.visible = False
     panel.name.value = name
     panel._save_clicked(None)  # the Save button's callback; a bad name never reaches the dialog that needs the tab
-    assert panel.message.visible and "Not saved" in panel.message.content and phrase in panel.message.content
+    assert panel.message.visible and "Not saved" in panel.message.content and phrase in html.unescape(panel.message.content)
     with pytest.raises(RegraspError, match=phrase):
         check_name(name)
     assert snapshot(panel.sessions_dir) == before

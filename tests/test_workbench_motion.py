@@ -4,6 +4,7 @@ trajectory; the object's pixels follow the holding hand from a Carry sample to a
 from __future__ import annotations
 
 import dataclasses
+import html
 import shutil
 import subprocess
 import sys
@@ -126,7 +127,7 @@ def test_layer_helpers(layer: MotionLayer) -> None:
     assert f"{seconds[len(PHASE_SECONDS) + 1]:.3f}" in table  # the Carry phase's validation
     assert FAILURE_COLOR not in layer.summary(r)
     failed = layer.summary(dataclasses.replace(r, failure="Carry phase, transit: no path"))
-    assert FAILURE_COLOR in failed and "Carry phase, transit: no path" in failed
+    assert FAILURE_COLOR in failed and "Carry phase, transit: no path" in html.unescape(failed)
 
 
 def test_motion_layer_is_drawn(workbench: Workbench, page: Page, layer: MotionLayer) -> None:

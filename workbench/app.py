@@ -15,11 +15,12 @@ import viser
 
 from planner.collision import CollisionChecker, build_collision_model
 from planner.errors import RegraspError
-from planner.forked import sigterm_unwinds, stop_pools
-from planner.paths import DEFAULT_TASK, TASKS_DIR
+from planner.forked import sigterm_unwinds
+from planner.paths import DEFAULT_TASK, PROJECT_ROOT, TASKS_DIR
 from planner.session import MANIFEST, Session
 from planner.task import Scene, load_task
 
+from .client_guard import ClientGuard
 from .collision_layer import CollisionLayer
 from .layer_toggles import LayerToggles
 from .notify import error_text
@@ -28,6 +29,7 @@ from .scene_layer import SceneLayer
 from .session_layers import SessionLayers
 from .session_panel import INITIAL, MOVED, OTHER, SessionPanel
 from .session_store import SESSIONS_DIR
+from .text import plain
 from .view import CAMERA_LOOK_AT, CAMERA_POSITION, close_up, move_cameras, setup_view
 
 MAX_LISTED_PAIRS = 8
@@ -57,6 +59,8 @@ class Workbench:
         if port and self.server.get_port() != port:  # viser moves on to the next free port; a person asked for this one
             self.server.stop()
             raise RegraspError(f"port {port} on {host} is in use (another workbench?): stop it, or choose another with --port")
+        self.guard = ClientGuard(self.server, host)
+        self.task_roots = (PROJECT_ROOT, scene.source.resolve().parent)  # where "Load file" may read task files
         self._lock = threading.RLock()
         self._generation = 0
         self.collision_ready = threading.Event()
@@ -88,8 +92,7 @@ class Workbench:
         """Stop the server and the workers of a run still going; a collision model still being built is dropped."""
         with self._lock:
             self._generation += 1
-        if self.session_panel.job is not None:
-            stop_pools(self.session_panel.job)
+        self.session_panel.close()
         self.server.stop()
 
     def _build_gui(self, sessions_dir: Path) -> None:
@@ -115,7 +118,7 @@ class Workbench:
             self.reset_button = gui.add_button("Reset", order=3.0, hint="Back to the task's initial configuration")
         self.collision_status = gui.add_markdown("")
         self.task_choice.on_update(lambda e: None if self._syncing_choices else self._load(self._task_files[e.target.value], e.client))
-        self.load_button.on_click(lambda e: self._load(Path(self.task_path.value.strip()).expanduser(), e.client))
+        self.load_button.on_click(lambda e: self._load(self.task_path.value, e.client))
         self.show_robot.on_update(lambda e: self._set_robot_visible(e.target.value))
         self.show_collision.on_update(lambda e: self._set_collision_shown(e.target.value))
         self.show_steps.on_update(lambda e: self._set_steps_visible(e.target.value))
@@ -127,28 +130,42 @@ class Workbench:
         """The task dropdown's label for a task file."""
         return next(label for label, p in self._task_files.items() if p == path.resolve())
 
-    def _load(self, path: Path, client: viser.ClientHandle | None) -> None:
-        """Load a task chosen in the GUI; a bad file shows its error and keeps the current task."""
+    def typed_task(self, text: str) -> Path:
+        """The task file typed in "Task file": a .toml file in the project or in the folder of the task the workbench
+        started with (a browser must not make the workbench read any file it likes)."""
+        path = Path(text.strip()).expanduser().resolve()
+        if path.suffix != ".toml" or not any(path.is_relative_to(root) for root in self.task_roots):
+            where = " or ".join(str(root) for root in dict.fromkeys(self.task_roots))
+            raise RegraspError(f"Task file: expected a .toml file in {where}, got {text.strip()!r:.200}")
+        return path
+
+    def _load(self, chosen: Path | str, client: viser.ClientHandle | None) -> None:
+        """Load a task chosen in the GUI (a listed file, or the text typed in "Task file"); a bad file shows its error
+        and keeps the current task."""
+        try:
+            path = chosen if isinstance(chosen, Path) else self.typed_task(chosen)
+        except RegraspError as exc:
+            self._refuse_task("Could not load the task", str(exc), client)
+            return
         if path.resolve() == self.scene.source:
             return
         if self.session_panel.busy():  # the run would throw the new task away when it ends
-            message = "a step is running: wait for it to finish, then load the task"
-            self.task_error.content = f"**Not loaded:** {message}"
-            self.task_error.visible = True
-            if client is not None:
-                client.add_notification("Task not loaded", message, color="red", auto_close_seconds=10.0)
+            self._refuse_task("Not loaded", "a step is running: wait for it to finish, then load the task", client)
             return
         self.task_error.visible = False
         try:
             scene = load_task(path)
         except Exception as exc:  # a bad file must never take the workbench down
-            message = error_text(exc)
-            self.task_error.content = f"**Could not load the task:** {message}"
-            self.task_error.visible = True
-            if client is not None:
-                client.add_notification("Could not load the task", message, color="red", auto_close_seconds=10.0)
+            self._refuse_task("Could not load the task", error_text(exc), client)
             return
         self._show(scene)
+
+    def _refuse_task(self, title: str, message: str, client: viser.ClientHandle | None) -> None:
+        """Say under the task (and to the asking tab) why the task shown stays."""
+        self.task_error.content = f"**{title}:** {plain(message)}"
+        self.task_error.visible = True
+        if client is not None:
+            client.add_notification(title, message, color="red", auto_close_seconds=10.0)
 
     def show_session(self, session: Session) -> None:
         """Draw a session: its step layers, and its scene too when it is not the one shown."""
@@ -255,7 +272,8 @@ class Workbench:
             # a replayed session's task file is its session.json: show the task it came from (a name or a relative path)
             self.task_path.value = session.manifest.get("task_source", "") if session is not None and scene is session.scene \
                 else str(scene.source)
-            self.task_info.content = f"**{scene.name}** — {scene.description}" if scene.description else f"**{scene.name}**"
+            about = f" — {plain(scene.description)}" if scene.description else ""
+            self.task_info.content = f"**{plain(scene.name)}**{about}"
             self.part.options = tuple(scene.robot.part_names())
             self._rebuild_sliders()
             self.collision_status.content = "*Collisions: building the collision model…*"
@@ -269,7 +287,7 @@ class Workbench:
         except Exception as exc:  # shown in the GUI; the rest of the workbench stays usable
             with self._lock:
                 if generation == self._generation:
-                    self.collision_status.content = f"**Collision model failed:** {error_text(exc)}"
+                    self.collision_status.content = f"**Collision model failed:** {plain(error_text(exc))}"
             return
         with self._lock:
             if generation != self._generation:
@@ -359,7 +377,7 @@ class Workbench:
         if not pairs:
             self.collision_status.content = "Collisions: **none**"
         else:
-            listed = ", ".join(f"`{a}` ↔ `{b}`" for a, b in pairs[:MAX_LISTED_PAIRS])
+            listed = ", ".join(f"*{plain(a)}* ↔ *{plain(b)}*" for a, b in pairs[:MAX_LISTED_PAIRS])
             more = f" and {len(pairs) - MAX_LISTED_PAIRS} more" if len(pairs) > MAX_LISTED_PAIRS else ""
             self.collision_status.content = f"<span style='color:#d22'>**{len(pairs)} colliding pairs:**</span> {listed}{more}"
 

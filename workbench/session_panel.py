@@ -18,6 +18,7 @@ import viser
 
 from planner.bounds import SEED, seed_problem
 from planner.errors import RegraspError
+from planner.forked import stop_pools
 from planner.pipeline import PIPELINE, step_named, steps_until
 from planner.runner import ProgressFactory, run_pipeline
 from planner.session import Session
@@ -32,11 +33,13 @@ from .session_store import (
     check_name,
     free_name,
     list_sessions,
+    remove_scratch,
     save_copy,
     scratch_copy,
     scratch_folder,
 )
 from .step_table import step_details, step_table
+from .text import plain
 
 if TYPE_CHECKING:
     from .app import Workbench
@@ -46,6 +49,7 @@ MOVED = "joints moved by hand"
 OTHER = "another configuration"
 NO_SESSIONS = "(no saved sessions)"
 NO_STEP = "(no step has run)"
+JOIN_SECONDS = 10.0  # how long closing waits for a stopped run to end before deleting its scratch session
 
 
 class SessionPanel:
@@ -55,6 +59,7 @@ class SessionPanel:
         self.wb = workbench
         self.sessions_dir = sessions_dir
         self.job: threading.Thread | None = None
+        self._starting = threading.Lock()  # makes "is a run going? then start one" one step
         self._scratch: Path | None = None  # the session folder the GUI created; the only one runs write into
         self._poses: dict[str, Pose] = {}
         self._syncing_robot_at = False  # True while `showing` rewrites "Robot at": its callback must not pose the robot
@@ -126,7 +131,7 @@ class SessionPanel:
     def _say(self, title: str, body: str, error: bool = False) -> None:
         """A message in the panel and a notification in every tab."""
         color = "#d22" if error else "#2a6"
-        self.message.content = f"<span style='color:{color}'>**{title}:**</span> {body}"
+        self.message.content = f"<span style='color:{color}'>**{plain(title)}:**</span> {plain(body)}"
         self.message.visible = True
         notify_all(self.wb.server, title, body, error)
 
@@ -185,9 +190,9 @@ class SessionPanel:
         except Exception as exc:  # a bad session must never take the workbench down
             self._say("Could not load the session", error_text(exc), error=True)
             return False
-        self._scratch = None
         self.message.visible = False
         self.wb.show_session(session)
+        self.scratch = None
         return True
 
     def save(self, name: str, overwrite: bool = False) -> Session:
@@ -224,7 +229,7 @@ class SessionPanel:
     def _confirm_overwrite(self, client: viser.ClientHandle, name: str) -> None:
         """A dialog on the asking tab: overwrite sessions/<name>, or cancel."""
         with client.gui.add_modal(f"Overwrite sessions/{name}?") as modal:
-            client.gui.add_markdown(f"`{self.sessions_dir / name}` already exists. Replace it with the current session?")
+            client.gui.add_markdown(f"*{plain(self.sessions_dir / name)}* already exists. Replace it with the current session?")
             overwrite = client.gui.add_button("Overwrite", color="red")
             cancel = client.gui.add_button("Cancel")
 
@@ -288,8 +293,8 @@ class SessionPanel:
             try:
                 run_pipeline(new, until, params, self._progress_factory(todo))
             finally:
-                self._scratch = None
                 self.wb.show_session(new)
+                self.scratch = None
                 self.saved.options = self._saved_options()
             self._say("Re-ran", f"from {step} into {target}; {session.folder} is unchanged")
         return self._start(work)
@@ -306,8 +311,29 @@ class SessionPanel:
             new = Session.create(scratch_folder(), self.wb.scene, seed)
         else:
             new = scratch_copy(session)
-        self._scratch = new.folder
+        self.scratch = new.folder
         return new
+
+    @property
+    def scratch(self) -> Path | None:
+        """The session folder the GUI created; the only one runs write into."""
+        return self._scratch
+
+    @scratch.setter
+    def scratch(self, folder: Path | None) -> None:
+        """Replace the scratch session; the one replaced is deleted (nothing shows it any more: it was saved, if at all, as
+        a copy)."""
+        if self._scratch is not None and self._scratch != folder:
+            remove_scratch(self._scratch)
+        self._scratch = folder
+
+    def close(self) -> None:
+        """Stop a run still going (its workers), then delete the scratch session."""
+        job = self.job
+        if job is not None and job.is_alive():
+            stop_pools(job)
+            job.join(JOIN_SECONDS)
+        self.scratch = None
 
     def _progress_factory(self, todo: list[Step]) -> ProgressFactory:
         """Per step, a callback moving the progress bar over this run's share of that step."""
@@ -318,32 +344,34 @@ class SessionPanel:
 
             def report(fraction: float, message: str = "") -> None:
                 self.progress.value = round(100 * (i + min(max(fraction, 0.0), 1.0)) / len(names), 1)
-                self.progress_text.content = f"*{step.name}* ({i + 1}/{len(names)}): {message}"
+                self.progress_text.content = f"*{step.name}* ({i + 1}/{len(names)}): {plain(message)}"
             return report
         return factory
 
     def _start(self, work: Callable[[], None]) -> threading.Thread | None:
         """Run `work` in a background thread with the run buttons disabled and the progress bar shown."""
-        if self._refuse_while_busy():
-            return None
-        for button in self._buttons:
-            button.disabled = True
-        self.progress.value, self.progress.visible = 0.0, True
-        self.progress_text.content, self.progress_text.visible = "*starting…*", True
-        self.message.visible = False
-
-        def body() -> None:
-            try:
-                work()
-            except Exception as exc:  # shown in the GUI; the workbench stays usable
-                self._say("Run failed", error_text(exc), error=True)
-            finally:
-                for button in self._buttons:
-                    button.disabled = False
-                self.progress.visible = self.progress_text.visible = False
-        self.job = threading.Thread(target=body, daemon=True)
-        self.job.start()
+        with self._starting:  # two clicks at once start one run
+            if self._refuse_while_busy():
+                return None
+            self.job = threading.Thread(target=lambda: self._run(work), daemon=True)
+            for button in self._buttons:
+                button.disabled = True
+            self.progress.value, self.progress.visible = 0.0, True
+            self.progress_text.content, self.progress_text.visible = "*starting…*", True
+            self.message.visible = False
+            self.job.start()
         return self.job
+
+    def _run(self, work: Callable[[], None]) -> None:
+        """A run's thread: `work`, its failure shown, then the buttons enabled again."""
+        try:
+            work()
+        except Exception as exc:  # shown in the GUI; the workbench stays usable
+            self._say("Run failed", error_text(exc), error=True)
+        finally:
+            for button in self._buttons:
+                button.disabled = False
+            self.progress.visible = self.progress_text.visible = False
 
     def busy(self) -> bool:
         """Whether a run is going (in another thread than the caller's)."""

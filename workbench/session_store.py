@@ -20,9 +20,18 @@ def list_sessions(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if Session.exists(p)) if folder.is_dir() else []
 
 
+SCRATCH_PREFIX = "regrasp-session-"
+
+
 def scratch_folder() -> Path:
-    """A fresh temporary folder for a session run from the GUI before it is saved."""
-    return Path(tempfile.mkdtemp(prefix="regrasp-session-")) / "session"
+    """A fresh temporary folder for a session run from the GUI before it is saved (`remove_scratch` deletes it)."""
+    return Path(tempfile.mkdtemp(prefix=SCRATCH_PREFIX)) / "session"
+
+
+def remove_scratch(folder: Path) -> None:
+    """Delete a folder `scratch_folder` made, with the temporary folder around it."""
+    if folder.parent.name.startswith(SCRATCH_PREFIX):
+        shutil.rmtree(folder.parent, ignore_errors=True)
 
 
 def scratch_copy(session: Session) -> Session:

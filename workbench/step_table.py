@@ -8,6 +8,7 @@ from planner.pipeline import PIPELINE
 from planner.session import Session
 
 from .layers import LAYERS
+from .text import plain
 
 MAX_FIGURES = 3  # per row when a step names no key figures: the panel is narrow; the details view shows them all
 MAX_TEXT = 16  # characters of a text figure in the table
@@ -24,11 +25,11 @@ KEY_FIGURES = {  # the figures a person looks at first, per step (the rest: in t
 
 
 def _figure(value: Any, limit: int | None = MAX_TEXT) -> str:
-    """A key figure, short: floats to 3 significant digits, long texts cut, pipes escaped for the table."""
+    """A key figure, short and shown as plain text: floats to 3 significant digits, long texts cut."""
     text = f"{value:.3g}" if isinstance(value, float) else str(value)
     if limit is not None and len(text) > limit:
         text = text[: limit - 1] + "…"
-    return text.replace("|", "\\|")
+    return plain(text)
 
 
 def key_figures(name: str, stats: dict[str, Any]) -> list[tuple[str, Any]]:
@@ -48,7 +49,7 @@ def step_table(session: Session | None) -> str:
             rows.append(f"| {step.name} | pending | | |")
             continue
         status = "failed" if record["stats"].get("failure") else "done" if step.name in LAYERS else "done (not drawn)"
-        figures = ", ".join(f"{k}={_figure(v)}" for k, v in key_figures(step.name, record["stats"]))
+        figures = ", ".join(f"{plain(k)}={_figure(v)}" for k, v in key_figures(step.name, record["stats"]))
         rows.append(f"| {step.name} | {status} | {record['seconds']:.1f} | {figures} |")
     return "\n".join(rows)
 
@@ -57,11 +58,11 @@ def step_details(session: Session, name: str) -> str:
     """Everything the session records of one finished step: seconds, seed, every figure and parameter."""
     record = session.record_of(name)
     step = next(s for s in PIPELINE if s.name == name)
-    lines = [f"**{name}** — {step.summary}", "", f"{record['seconds']:.2f} s, seed {record['seed']}", "",
+    lines = [f"**{name}** — {step.summary}", "", f"{record['seconds']:.2f} s, seed {plain(record['seed'])}", "",
              "| figure | value |", "| --- | --- |"]
-    lines += [f"| {k} | {_figure(json.dumps(v) if isinstance(v, (dict, list)) else v, None)} |" for k, v in record["stats"].items()]
+    lines += [f"| {plain(k)} | {_figure(json.dumps(v) if isinstance(v, (dict, list)) else v, None)} |" for k, v in record["stats"].items()]
     if record.get("stage_seconds"):
         lines.append(f"| stage seconds | {', '.join(f'{t:.2f}' for t in record['stage_seconds'])} |")
     lines += ["", "| parameter | value |", "| --- | --- |"]
-    lines += [f"| {k} | {_figure(v, None)} |" for k, v in record["params"].items()]
+    lines += [f"| {plain(k)} | {_figure(v, None)} |" for k, v in record["params"].items()]
     return "\n".join(lines)

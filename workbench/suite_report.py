@@ -5,10 +5,10 @@ region, success per object, failures per step and stage, seconds per step (media
 one with the `regrasp replay` command of its session."""
 from __future__ import annotations
 
-import html
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 import numpy as np
 from scipy.spatial import ConvexHull
@@ -16,6 +16,8 @@ from scipy.spatial import ConvexHull
 from planner.environment import Environment
 from planner.results import atomic_write_text
 from planner.suite.spec import Region, SuiteSpec
+
+from .text import plain
 
 OK, FAILED, INK, FAINT = "#2a9d4a", "#d1495b", "#222", "#888"
 STYLE = """
@@ -28,10 +30,6 @@ svg text { font: 11px system-ui, sans-serif; fill: #222; }
 """
 
 
-def _e(value: Any) -> str:
-    return html.escape(str(value))
-
-
 def _margins(labels: Iterable[str], notes: Iterable[str]) -> tuple[int, int]:
     """(the width left of the bars, the width right of them) that fit the labels and the notes (6.5 px a character)."""
     return 12 + int(6.5 * max(map(len, labels), default=0)), 12 + int(6.5 * max(map(len, notes), default=0))
@@ -40,22 +38,22 @@ def _margins(labels: Iterable[str], notes: Iterable[str]) -> tuple[int, int]:
 def _bars(title: str, rows: list[tuple[str, float, float, str]], unit: str = "", cls: str = "") -> str:
     """A horizontal bar chart: (label, value, a mark at this value or 0 for none, text after the bar) per row."""
     if not rows:
-        return f'<figure class="plot {cls}"><figcaption>{_e(title)}: nothing to show</figcaption></figure>'
+        return f'<figure class="plot {cls}"><figcaption>{plain(title)}: nothing to show</figcaption></figure>'
     (left, right), bar_w, row_h = _margins((r[0] for r in rows), (r[3] for r in rows)), 240, 20
     width = left + bar_w + right
     top = max(max(v, w) for _, v, w, _ in rows) or 1.0
     parts = []
     for i, (label, value, whisker, note) in enumerate(rows):
         y = 8 + i * row_h
-        parts.append(f'<text x="{left - 6}" y="{y + 13}" text-anchor="end">{_e(label)}</text>')
+        parts.append(f'<text x="{left - 6}" y="{y + 13}" text-anchor="end">{plain(label)}</text>')
         parts.append(f'<rect class="bar" x="{left}" y="{y + 3}" width="{max(value / top * bar_w, 1):.1f}" height="13" fill="#4a78b5"/>')
         if whisker:
             x = left + whisker / top * bar_w
             parts.append(f'<line x1="{x:.1f}" x2="{x:.1f}" y1="{y + 1}" y2="{y + 18}" stroke="{INK}" stroke-width="2"/>')
-        parts.append(f'<text x="{left + max(value, whisker) / top * bar_w + 6:.1f}" y="{y + 13}">{_e(note)}</text>')
+        parts.append(f'<text x="{left + max(value, whisker) / top * bar_w + 6:.1f}" y="{y + 13}">{plain(note)}</text>')
     height = 16 + len(rows) * row_h
     return (f'<figure class="plot {cls}"><svg width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img">'
-            f'<title>{_e(title)}</title>{"".join(parts)}</svg><figcaption>{_e(title)}{_e(unit)}</figcaption></figure>')
+            f'<title>{plain(title)}</title>{"".join(parts)}</svg><figcaption>{plain(title)}{plain(unit)}</figcaption></figure>')
 
 
 def _success_bars(title: str, rates: dict[str, dict[str, Any]], cls: str) -> str:
@@ -67,13 +65,14 @@ def _success_bars(title: str, rates: dict[str, dict[str, Any]], cls: str) -> str
     for i, (name, r) in enumerate(rates.items()):
         y, ok_w = 8 + i * row_h, r["succeeded"] / most * bar_w
         fail_w = (r["tasks"] - r["succeeded"]) / most * bar_w
-        parts += [f'<text x="{left - 6}" y="{y + 13}" text-anchor="end">{_e(name)}</text>',
+        parts += [f'<text x="{left - 6}" y="{y + 13}" text-anchor="end">{plain(name)}</text>',
                   f'<rect class="ok" x="{left}" y="{y + 3}" width="{ok_w:.1f}" height="13" fill="{OK}"/>',
                   f'<rect class="failed" x="{left + ok_w:.1f}" y="{y + 3}" width="{fail_w:.1f}" height="13" fill="{FAILED}"/>',
-                  f'<text x="{left + ok_w + fail_w + 6:.1f}" y="{y + 13}">{r["succeeded"]}/{r["tasks"]} ({r["success_rate"]:.0%})</text>']
+                  f'<text x="{left + ok_w + fail_w + 6:.1f}" y="{y + 13}">{plain(r["succeeded"])}/{plain(r["tasks"])} '
+                  f'({r["success_rate"]:.0%})</text>']
     height = 16 + len(rates) * row_h
     return (f'<figure class="plot {cls}"><svg width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img">'
-            f'<title>{_e(title)}</title>{"".join(parts)}</svg><figcaption>{_e(title)}: succeeded (green) and failed (red) tasks'
+            f'<title>{plain(title)}</title>{"".join(parts)}</svg><figcaption>{plain(title)}: succeeded (green) and failed (red) tasks'
             f'</figcaption></figure>')
 
 
@@ -102,19 +101,19 @@ def _top_view(environment: Environment, regions: Iterable[Region], results: list
     parts = []
     for name, xy, color in feet:
         points = " ".join("{:.1f},{:.1f}".format(*at(x, y)) for x, y in xy)
-        parts.append(f'<polygon points="{points}" fill="rgb{tuple(color)}" fill-opacity="0.55" stroke="#555" stroke-width="0.5">'
-                     f'<title>{_e(name)}</title></polygon>')
+        parts.append(f'<polygon points="{points}" fill="rgb{plain(tuple(color))}" fill-opacity="0.55" stroke="#555" stroke-width="0.5">'
+                     f'<title>{plain(name)}</title></polygon>')
     for region in regions:
         (sx0, sy0), (sx1, sy1) = at(region.x[1], region.y[1]), at(region.x[0], region.y[0])
         parts.append(f'<rect class="region" x="{sx0:.1f}" y="{sy0:.1f}" width="{sx1 - sx0:.1f}" height="{sy1 - sy0:.1f}" fill="none" '
-                     f'stroke="{INK}" stroke-dasharray="4 3"/><text x="{sx0:.1f}" y="{sy0 - 3:.1f}">{_e(region.name)}</text>')
+                     f'stroke="{INK}" stroke-dasharray="4 3"/><text x="{sx0:.1f}" y="{sy0 - 3:.1f}">{plain(region.name)}</text>')
     rx, ry = at(0.0, 0.0)
     parts.append(f'<circle cx="{rx:.1f}" cy="{ry:.1f}" r="9" fill="#bbb" stroke="{INK}"/>'
                  f'<text x="{rx + 12:.1f}" y="{ry + 4:.1f}">robot</text>')
     for r in results:
         colour = OK if r["success"] else FAILED
         (ix, iy), (fx, fy) = at(*r["initial"][:2]), at(*r["final"][:2])
-        tip = _e(f'{r["id"]}: ' + ("succeeded" if r["success"] else f'failed at {r["failed_step"]}'))
+        tip = plain(f'{r["id"]}: ' + ("succeeded" if r["success"] else f'failed at {r["failed_step"]}'))
         parts.append(f'<line x1="{ix:.1f}" y1="{iy:.1f}" x2="{fx:.1f}" y2="{fy:.1f}" stroke="{colour}" stroke-opacity="0.15"/>')
         parts.append(f'<circle class="placement initial" cx="{ix:.1f}" cy="{iy:.1f}" r="4" fill="{colour}">'
                      f'<title>{tip} (start)</title></circle>')
@@ -131,12 +130,13 @@ def _task_rows(results: list[dict[str, Any]], folder: str) -> str:
     for r in results:
         replay = f"regrasp replay {folder}/{r['session']}"
         outcome = "ok" if r["success"] else f"failed at {r['failed_step']}" + (f" ({r['failed_stage']})" if r["failed_stage"] else "")
-        link = f'<a class="replay" href="{_e(r["session"])}/">session</a> <code>{_e(replay)}</code>' if not r["success"] else \
-            f'<a href="{_e(r["session"])}/">session</a>'
+        href = plain(quote(str(r["session"])))  # a relative address: ':' quoted, so no scheme (javascript:) can start it
+        link = f'<a class="replay" href="{href}/">session</a> <code>{plain(replay)}</code>' if not r["success"] else \
+            f'<a href="{href}/">session</a>'
         figures = [r["double_grasps"], *(f"{r[k]:.1f}" if r[k] is not None else "" for k in ("motion_duration", "path_length"))]
-        rows.append(f'<tr class="{"ok" if r["success"] else "failed"}"><td>{_e(r["id"])}</td><td>{_e(r["initial_region"])} → '
-                    f'{_e(r["final_region"])}</td><td>{_e(outcome)}</td><td>{_e(r["message"])}</td>'
-                    + "".join(f"<td>{_e('' if v is None else v)}</td>" for v in figures) + f"<td>{link}</td></tr>")
+        rows.append(f'<tr class="{"ok" if r["success"] else "failed"}"><td>{plain(r["id"])}</td><td>{plain(r["initial_region"])} → '
+                    f'{plain(r["final_region"])}</td><td>{plain(outcome)}</td><td>{plain(r["message"])}</td>'
+                    + "".join(f"<td>{plain('' if v is None else v)}</td>" for v in figures) + f"<td>{link}</td></tr>")
     head = "<tr><th>task</th><th>regions</th><th>outcome</th><th>message</th><th>double grasps</th><th>motion s</th>" \
            "<th>path rad</th><th>session</th></tr>"
     return f'<table id="tasks">{head}{"".join(rows)}</table>'
@@ -149,17 +149,18 @@ def report_html(data: dict[str, Any], spec: SuiteSpec, environment: Environment,
     failures = [(key, n, 0.0, str(n)) for key, n in data["by_stage"].items()]
     regions = {**{f"from {k}": v for k, v in data["by_initial_region"].items()},
                **{f"to {k}": v for k, v in data["by_final_region"].items()}}
-    figures = (f'<span>tasks <b>{data["finished"]}</b> of {data["tasks"]}</span><span>succeeded <b>{data["succeeded"]}</b></span>'
+    figures = (f'<span>tasks <b>{plain(data["finished"])}</b> of {plain(data["tasks"])}</span>'
+               f'<span>succeeded <b>{plain(data["succeeded"])}</b></span>'
                f'<span>success rate <b id="success-rate">{data["success_rate"]:.1%}</b></span>'
-               f'<span>through step <b>{_e(data["until"])}</b></span><span>wall time <b>{data["wall_seconds"]:.0f} s</b></span>')
+               f'<span>through step <b>{plain(data["until"])}</b></span><span>wall time <b>{data["wall_seconds"]:.0f} s</b></span>')
     return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>Suite {_e(spec.name)}: report</title><style>{STYLE}</style></head>
-<body><h1>Suite {_e(spec.name)}</h1><p>{_e(spec.source)} · base task {_e(spec.base_task.name)} · seed {spec.seed} · plan seed
-{spec.plan_seed}</p><p class="figures">{figures}</p>
+<html lang="en"><head><meta charset="utf-8"><title>Suite {plain(spec.name)}: report</title><style>{STYLE}</style></head>
+<body><h1>Suite {plain(spec.name)}</h1><p>{plain(spec.source)} · base task {plain(spec.base_task.name)}
+· seed {plain(spec.seed)} · plan seed {plain(spec.plan_seed)}</p><p class="figures">{figures}</p>
 <h2>Where the objects were placed</h2><div class="plots">{_top_view(environment, (*spec.initial_regions, *spec.final_regions), results)}
 {_success_bars("Success per placement region", regions, "regions")}</div>
 <h2>Success per object</h2><div class="plots">{_success_bars("Success per object", data["by_object"], "objects")}</div>
-<p>{"; ".join(f"<b>{_e(o.name)}</b>: {_e(o.description)}" for o in spec.objects)}</p>
+<p>{"; ".join(f"<b>{plain(o.name)}</b>: {plain(o.description)}" for o in spec.objects)}</p>
 <h2>Failures and time</h2><div class="plots">{_bars("Failures per step and stage", failures, cls="failures")}
 {_bars("Seconds per step: median (bar) and p95 (mark)", seconds, cls="seconds")}</div>
 <h2>Tasks</h2><p>Each task's session is in <code>sessions/</code>; open one with the command beside it.</p>{_task_rows(results, folder)}

@@ -14,6 +14,7 @@ from planner.task import Scene
 
 from ..meshes import matrix_wxyz
 from ..scene_layer import OBJECT_COLOR
+from ..text import plain
 from .arms import ARM_COLORS
 from .base import Host, Pose, StepLayer
 from .hands import HandMeshes
@@ -88,7 +89,7 @@ class DoubleGraspsLayer(StepLayer):
 
     @staticmethod
     def summary(result: DoubleGrasps) -> str:
-        return (f"{result.pairs} pairs with configurations, {result.compatible} compatible, {result.tried} tried, "
+        return (f"{plain(result.pairs)} pairs with configurations, {plain(result.compatible)} compatible, {plain(result.tried)} tried, "
                 f"{len(result)} with an exchange configuration.\n\n" + stages_markdown(result.stages, result.failure))
 
     def select(self, index: int) -> None:
@@ -103,8 +104,8 @@ class DoubleGraspsLayer(StepLayer):
             for hand, g, rank in zip(hands, grasps, (r.pick_rank[index], r.place_rank[index])):
                 hand.pose(g.hand_pose[rank], g.finger_q[rank])
         if self.details is not None:
-            self.details.content = (f"**Pair {index + 1}** of {len(r)}: pick grasp {r.pick_rank[index] + 1} ({r.picking_arm} hand), "
-                                    f"place grasp {r.place_rank[index] + 1} ({r.placing_arm} hand); quality {r.quality[index]:.3f}, "
+            self.details.content = (f"**Pair {index + 1}** of {len(r)}: pick grasp {r.pick_rank[index] + 1} ({plain(r.picking_arm)} hand), "
+                                    f"place grasp {r.place_rank[index] + 1} ({plain(r.placing_arm)} hand); quality {r.quality[index]:.3f}, "
                                     f"configuration {r.config[index]:.3f}, score {r.score[index]:.3f}\n\n{self.summary(r)}")
         if self.pair is not None and pair_of(self.pair.value) != index:
             self.pair.value = pair_labels(r)[index]

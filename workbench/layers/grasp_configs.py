@@ -10,6 +10,7 @@ from planner.grasp_configs import GraspConfigs
 from planner.grasps import GraspList
 from planner.reach import fingertip_centre
 
+from ..text import plain
 from .base import Pose, StepLayer
 from .stages import stages_markdown
 
@@ -60,7 +61,7 @@ class GraspConfigsLayer(StepLayer):
                 best = int(np.argmax(configs.score))
                 self.poses[f"grasp configs: best {role} (rank {configs.rank[best] + 1})"] = Pose(configs.q[best], np.asarray(T, float))
             kept, clear = len(configs.rank), int(env_free.sum())
-            lines.append(f"- **{role}** ({configs.arm} hand, {placement} pose): {kept} with a configuration, "
+            lines.append(f"- **{role}** ({plain(configs.arm)} hand, {placement} pose): {kept} with a configuration, "
                          f"{clear - kept} clear only, {len(env_free) - clear} removed")
         self.folder = self.server.gui.add_folder("Grasp configurations", expand_by_default=False)
         with self.folder:

@@ -15,6 +15,7 @@ from planner.session import Session
 from planner.task import Scene
 
 from ..meshes import matrix_wxyz
+from ..text import plain
 from .arms import ARM_COLORS
 from .base import Host, StepLayer
 from .hands import HAND_STYLE, HandMeshes
@@ -140,14 +141,14 @@ class GraspsLayer(StepLayer):
 
     @staticmethod
     def summary(result: GraspList) -> str:
-        return (f"{len(result)} grasps kept of {result.frames_tried} frames tried, μ={result.mu:g}, "
-                f"{result.cone_edges} cone edges")
+        return (f"{len(result)} grasps kept of {plain(result.frames_tried)} frames tried, μ={result.mu:g}, "
+                f"{plain(result.cone_edges)} cone edges")
 
     def scores_text(self, rank: int) -> str:
         r = self.result
         assert r is not None
         rows = "\n".join(f"| {s} | {float(getattr(r, s)[rank]):.4f} |" for s in r.SCORES)
-        fingers = ", ".join(c["finger"] for c in r.contacts(rank))
+        fingers = ", ".join(plain(c["finger"]) for c in r.contacts(rank))
         return f"**Rank {rank + 1}** of {len(r)} — contacts: {fingers}\n\n| score | value |\n|---|---|\n{rows}\n\n{self.summary(r)}"
 
     def _set_spheres_visible(self, visible: bool) -> None:

@@ -22,6 +22,7 @@ from planner.task import Scene
 from ..meshes import matrix_wxyz
 from ..notify import error_text
 from ..scene_layer import OBJECT_COLOR
+from ..text import plain
 from .base import Host, StepLayer
 from .stages import FAILURE_COLOR
 
@@ -53,16 +54,16 @@ def table_one(result: Motion, seconds: list[float] | None) -> str:
     edges invalidated, RRT calls, transit collision checks, path length and duration."""
     phases, per = result.phases, len(PHASE_SECONDS)
     secs = seconds if seconds and len(seconds) >= per * len(phases) else None
-    rows = [("nodes planning", [str(p["nodes_planning"]) for p in phases]),
-            ("nodes validating", [str(p["nodes_validating"]) for p in phases])]
+    rows = [("nodes planning", [plain(p["nodes_planning"]) for p in phases]),
+            ("nodes validating", [plain(p["nodes_validating"]) for p in phases])]
     rows += [(f"s {stage}", [f"{secs[per * k + j]:.3f}" if secs else "–" for k in range(len(phases))])
              for j, stage in enumerate(PHASE_SECONDS)]
-    rows += [("edges invalidated", [str(p["edges_invalidated"]) for p in phases]),
-             ("RRT calls", [str(p["rrt_calls"]) for p in phases]),
-             ("transit checks", [str(p.get("transit_checks", "–")) for p in phases]),  # sessions before they were counted: '–'
+    rows += [("edges invalidated", [plain(p["edges_invalidated"]) for p in phases]),
+             ("RRT calls", [plain(p["rrt_calls"]) for p in phases]),
+             ("transit checks", [plain(p.get("transit_checks", "–")) for p in phases]),  # sessions before they were counted: '–'
              ("length (rad)", [f"{p['path_length']:.2f}" for p in phases]),
              ("duration (s)", [f"{p['duration']:.2f}" for p in phases])]
-    head = "| | " + " | ".join(p["phase"] for p in phases) + " |\n|---|" + "---:|" * len(phases)
+    head = "| | " + " | ".join(plain(p["phase"]) for p in phases) + " |\n|---|" + "---:|" * len(phases)
     return "\n".join([head, *(f"| {name} | " + " | ".join(cells) + " |" for name, cells in rows)])
 
 
@@ -125,15 +126,15 @@ class MotionLayer(StepLayer):
         """Which double grasp moved, the routes' colours, Table I and the failure (red)."""
         used = (f"Double grasp **{result.double_grasp + 1}** of {len(result.tried)} tried" if result.double_grasp >= 0
                 else f"No double grasp worked ({len(result.tried)} tried)")
-        failed = [f"{k + 1}: {why}" for k, why in enumerate(result.tried) if why]
-        text = (f"{used}; planner `{result.planner}`, {len(result.t)} samples, {result.duration:.2f} s.\n\n"
+        failed = [f"{k + 1}: {plain(why)}" for k, why in enumerate(result.tried) if why]
+        text = (f"{used}; planner *{plain(result.planner)}*, {len(result.t)} samples, {result.duration:.2f} s.\n\n"
                 f"Wrist routes: " + ", ".join(f"{p} {c}" for p, c in zip(PHASES, PHASE_COLOR_NAMES)) + ".\n\n")
         if result.phases:
             text += table_one(result, self._seconds())
         if failed and not result.failure:
             text += "\n\nFailed before: " + "; ".join(failed)
         if result.failure:
-            text += f"\n\n<span style='color:{FAILURE_COLOR}'>**Failed:** {result.failure}</span>"
+            text += f"\n\n<span style='color:{FAILURE_COLOR}'>**Failed:** {plain(result.failure)}</span>"
         return text
 
     def _build_gui(self, result: Motion) -> None:
@@ -200,7 +201,7 @@ class MotionLayer(StepLayer):
         r = self.result
         assert r is not None
         holder = int(r.holder[i])
-        held = f"held by the {r.arms[holder]} hand" if holder >= 0 else "object static"
+        held = f"held by the {plain(r.arms[holder])} hand" if holder >= 0 else "object static"
         return f"**{PHASES[int(r.phase[i])]}** — t = {r.t[i]:.2f} s of {r.duration:.2f} s, sample {i}; {held}"
 
     # -- playback --------------------------------------------------------------------------------

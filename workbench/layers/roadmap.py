@@ -23,6 +23,7 @@ from planner.session import Session
 from planner.task import Scene
 
 from ..notify import error_text
+from ..text import plain
 from .arms import ARM_COLORS
 from .base import Host, Pose, StepLayer
 
@@ -143,9 +144,9 @@ class RoadmapLayer(StepLayer):
         gui = self.server.gui
         n = max(1, stats["nodes"])
         with gui.add_folder("Roadmap") as self.folder:
-            gui.add_markdown(f"Super Graph: **{stats['nodes']}** nodes, **{stats['edges']}** edges, "
-                             f"**{stats['components']}** components (largest {stats['largest_component']}); "
-                             + ", ".join(f"{a} wrist: {c}" for a, c in zip(self.roadmap.arms, ARM_COLOR_NAMES)))
+            gui.add_markdown(f"Super Graph: **{plain(stats['nodes'])}** nodes, **{plain(stats['edges'])}** edges, "
+                             f"**{plain(stats['components'])}** components (largest {plain(stats['largest_component'])}); "
+                             + ", ".join(f"{plain(a)} wrist: {c}" for a, c in zip(self.roadmap.arms, ARM_COLOR_NAMES)))
             self.node = gui.add_slider("Node", min=0, max=n - 1, step=1, initial_value=0,
                                        hint="A Super Graph node: the robot goes there")
             self.go_button = gui.add_button("Robot to node")
@@ -213,12 +214,12 @@ class RoadmapLayer(StepLayer):
                 t0 = time.monotonic()
                 result = planner.query(q, roadmap.node_q[i])
         except Exception as exc:  # shown, never raised into viser's thread
-            self._say(f"<span style='color:#d22'>**Query failed:** {error_text(exc)}</span>")
+            self._say(f"<span style='color:#d22'>**Query failed:** {plain(error_text(exc))}</span>")
             return
         self.last_query = result
         note = " (hands put at rest first)" if moved else ""
         if not result.found:
-            self._say(f"<span style='color:#d22'>**No path** to node {i}{note}: {result.message}</span>")
+            self._say(f"<span style='color:#d22'>**No path** to node {i}{note}: {plain(result.message)}</span>")
             return
         self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, {len(result.nodes)} graph nodes, "
                   f"length {result.length:.2f} rad, {result.checks} checks, {time.monotonic() - t0:.1f} s. *Animating…*")
