@@ -3,6 +3,7 @@ by `--set`, by the command options that set a parameter, by the workbench's inpu
 from __future__ import annotations
 
 import dataclasses
+import html
 import json
 import shutil
 from collections.abc import Iterator
@@ -61,7 +62,7 @@ def test_every_numeric_parameter_declares_a_range_and_unit_holding_its_default()
     ("roadmap.nodes=-5", "parameter nodes expects a value from 2 to 500 nodes, got -5"),
     ("roadmap.nodes=1000000000", "parameter nodes expects a value from 2 to 500 nodes, got 1000000000"),
     ("grasp_configs.workers=100000", "parameter workers expects a value from 1 to 64 processes, got 100000"),
-    ("motion.rate=" + "9" * 400, "parameter rate expects a value from 1 to 1000 Hz, got an integer of"),  # no OverflowError
+    ("motion.rate=" + "9" * 400, "field 'motion.rate': an integer of 400 digits; expected at most 100 digits"),  # no OverflowError
     ("motion.contact_coarse=0", "parameter contact_coarse expects a value from 1 to 100 (factor), got 0"),
     ("roadmap.env_clearance=0.05", "parameter env_clearance must be below env_padding (0.03 m)"),
     ("motion.contact_env_clearance=0.01", "parameter contact_env_clearance must be below contact_env_padding (0.008 m)"),
@@ -72,7 +73,7 @@ def test_set_out_of_range_is_one_line_before_any_folder(tmp_path: Path, capsys: 
     out = tmp_path / "session"
     assert main(["plan", "default", "--out", str(out), "--set", assignment]) == 2
     line = one_error_line(capsys.readouterr().err)
-    assert f"step '{assignment.split('.')[0]}'" in line and message in line, line
+    assert assignment.split('.')[0] in line and message in line, line
     assert not out.exists(), "a session folder was made for a --set that cannot run"
 
 
@@ -185,7 +186,7 @@ def test_workbench_refuses_an_out_of_range_value_before_a_rerun_folder(workbench
     assert panel._params is not None
     panel._params.handles["seeds"].value = -3
     assert panel.rerun("arms", panel._params.values()) is None
-    assert "parameter seeds expects a value from 1 to 1000 IK starts, got -3" in panel.message.content, panel.message.content
+    assert "parameter seeds expects a value from 1 to 1000 IK starts, got -3" in html.unescape(panel.message.content), panel.message.content
     assert sorted(p.name for p in panel.sessions_dir.iterdir()) == before, "a re-run folder was made for a refused value"
 
 
@@ -197,7 +198,7 @@ def test_workbench_refuses_a_seed_out_of_range(workbench: Workbench) -> None:
     job = panel.run_next()
     assert job is not None
     job.join(60)
-    assert "Seed: expected a seed from 0 to 2**64 - 1, got -1" in panel.message.content, panel.message.content
+    assert "Seed: expected a seed from 0 to 2**64 - 1, got -1" in html.unescape(panel.message.content), panel.message.content
     assert workbench.session is None, "a session was started with a seed no session can hold"
 
 

@@ -63,6 +63,7 @@ class TaskJob:
     until: str | None
     cpus: int = 1
     timeout: float = 1200.0  # s
+    params: dict[str, dict[str, Any]] = field(default_factory=dict)  # step name -> parameter values
 
 
 @dataclass(frozen=True)
@@ -133,7 +134,7 @@ def run_job(job: TaskJob) -> JobResult:
             with time_limit(job.timeout), cpu_budget(job.cpus):
                 scene = scene_from_dict(load_toml(task), task, robot_path=spec)
                 session = Session.create(folder, scene, job.seed)
-                run_pipeline(session, job.until, warn=lambda message: None)
+                run_pipeline(session, job.until, job.params, warn=lambda message: None)
         except TaskTimeout:
             failure = (_running(session), f"ran past the suite's task_timeout of {job.timeout:g} s")
         except StepFailed as exc:

@@ -114,7 +114,7 @@ def _finished(folder: Path, task: GeneratedTask) -> TaskRecord | None:
 
 def _job(folder: Path, task: GeneratedTask, spec: SuiteSpec, until: str | None) -> TaskJob:
     files = {name: (folder / "tasks" / name).read_bytes() for name in task.files}
-    return TaskJob(task.id, files, task.files[1], spec.plan_seed, until, spec.task_cpus, spec.task_timeout)
+    return TaskJob(task.id, files, task.files[1], spec.plan_seed, until, spec.task_cpus, spec.task_timeout, spec.params)
 
 
 def _eta(seconds: float) -> str:

@@ -10,6 +10,9 @@ attempts = 30         # placements sampled for a task before its region is decla
 task_cpus = 1         # CPUs each task may use (its grasp search, transits...): a suite runs --workers tasks at once
 task_timeout = 1200   # seconds a task may run before it is recorded as failed at stage "timeout"
 
+[params.pick_grasps]  # step parameters every task runs with (as `--set pick_grasps.positions=20`); optional
+positions = 20
+
 [[objects]]           # the statuette, a mesh file (beside the suite or in assets/objects/, with scale and up), or a shape
 name = "box_long"
 shape = "box"         # one of planner/shapes.py's SHAPES, with its parameters
@@ -36,6 +39,7 @@ from ..bounds import SEED
 from ..errors import InputError, RegraspError
 from ..object_mesh import UP_AXES, MeshOptions
 from ..paths import ASSETS, named_file
+from ..pipeline import step_named
 from ..shapes import SHAPES, generate, obj_text
 from ..task import BUILTIN_OBJECTS, MAX_COORDINATE, find_task
 from ..tomlread import Table, load_toml
@@ -90,6 +94,7 @@ class SuiteSpec:
     attempts: int
     task_cpus: int
     task_timeout: float  # s
+    params: dict[str, dict[str, Any]]  # step name -> parameter values (checked), for every task
     handover: bool
     objects: tuple[SuiteObject, ...]
     initial_regions: tuple[Region, ...]
@@ -123,6 +128,22 @@ def _timeout(tab: Table) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= MAX_TASK_TIMEOUT:
         raise tab.error("task_timeout", f"expected seconds, more than 0 and at most {MAX_TASK_TIMEOUT}, got {value!r}")
     return float(value)
+
+
+def _params(root: Table) -> dict[str, dict[str, Any]]:
+    """The suite's step parameters, each checked as `--set` checks it."""
+    tables = root.data.get("params", {})
+    if not isinstance(tables, dict) or not all(isinstance(v, dict) for v in tables.values()):
+        raise root.error("params", "expected tables of step parameters, e.g. [params.pick_grasps] positions = 20")
+    out: dict[str, dict[str, Any]] = {}
+    for name, values in tables.items():
+        try:
+            step = step_named(name)
+            step.make_params(values)
+        except RegraspError as exc:
+            raise root.error(f"params.{name}", str(exc)) from exc
+        out[step.name] = dict(values)
+    return out
 
 
 def _range(tab: Table, key: str, limit: float, default: Any = None) -> tuple[float, float]:
@@ -197,7 +218,8 @@ def load_suite(path: str | Path) -> SuiteSpec:
     path = find_suite(path)
     data = load_toml(path)
     root = Table(data, path)
-    root.check_keys({"name", "description", "task", "tasks", "seed", "plan_seed", "attempts", "task_cpus", "task_timeout", "handover",
+    root.check_keys({"name", "description", "task", "tasks", "seed", "plan_seed", "attempts", "task_cpus", "task_timeout", "params",
+                    "handover",
                     "objects",
                      "initial_regions", "final_regions"})
     task_value = root.str("task")
@@ -216,5 +238,5 @@ def load_suite(path: str | Path) -> SuiteSpec:
     return SuiteSpec(path, path.read_text(), root.str("name"), base_task.resolve(), _int(root, "tasks", 10, 1, MAX_TASKS),
                      _int(root, "seed", 0, 0, 2**63 - 1), _int(root, "plan_seed", 0, SEED.low, SEED.high),
                      _int(root, "attempts", 30, 1, MAX_ATTEMPTS), _int(root, "task_cpus", 1, 1, MAX_TASK_CPUS),
-                     _timeout(root), root.bool("handover", default=True), objects,
+                     _timeout(root), _params(root), root.bool("handover", default=True), objects,
                      regions["initial_regions"], regions["final_regions"])
