@@ -32,18 +32,8 @@ from workbench.suite_report import write_report
 UNTIL = "place_grasps"
 PLAN_SEED = 3  # the session tests' seed, whose statuette grasp lists are in the shared test cache
 # four statuettes near the default task's placements (the right arm picks, the left places), at other positions and headings
-SUITE = f"""
-name = "four"
-task = "default"
-tasks = 4
-seed = 1
-plan_seed = {PLAN_SEED}
-attempts = 20
-
-[[objects]]
-name = "statuette"
-mesh = "statuette"
-
+# start and goal regions near the default task's placements (the right arm picks, the left places)
+REGIONS = """
 [[initial_regions]]
 name = "right"
 x = [0.43, 0.50]
@@ -58,6 +48,19 @@ y = [0.80, 0.87]
 z = 0.72
 yaw = [2.3, 3.1]
 """
+SUITE = f"""
+name = "four"
+task = "default"
+tasks = 4
+seed = 1
+plan_seed = {PLAN_SEED}
+attempts = 20
+
+[[objects]]
+name = "statuette"
+mesh = "statuette"
+
+{REGIONS}"""
 
 
 def regrasp(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:

@@ -11,15 +11,16 @@ import time
 from pathlib import Path
 
 import pytest
+from test_suite import REGIONS
 
-SMALL = """
+SMALL = f"""
 name = "small"
 task = "default"
 tasks = 2
 seed = 1
 plan_seed = 0
 attempts = 20
-{extra}
+{{extra}}
 
 [params.pick_grasps]
 positions = 12
@@ -38,20 +39,7 @@ name = "box"
 shape = "box"
 size = [0.06, 0.05, 0.12]
 
-[[initial_regions]]
-name = "right"
-x = [0.43, 0.50]
-y = [-0.87, -0.80]
-z = 0.72
-yaw = [0.8, 1.6]
-
-[[final_regions]]
-name = "behind_lamp"
-x = [0.48, 0.56]
-y = [0.80, 0.87]
-z = 0.72
-yaw = [2.3, 3.1]
-"""
+{REGIONS}"""
 
 
 def _descendants(pid: int) -> set[int]:

@@ -11,8 +11,9 @@ from typing import Any
 
 import pytest
 from sandbox import one_error_line, regrasp, snapshot
+from test_suite import REGIONS
 
-SUITE = """
+SUITE = f"""
 name = "one"
 task = "default"
 tasks = 1
@@ -24,20 +25,7 @@ attempts = 20
 name = "statuette"
 mesh = "statuette"
 
-[[initial_regions]]
-name = "right"
-x = [0.43, 0.50]
-y = [-0.87, -0.80]
-z = 0.72
-yaw = [0.8, 1.6]
-
-[[final_regions]]
-name = "behind_lamp"
-x = [0.48, 0.56]
-y = [0.80, 0.87]
-z = 0.72
-yaw = [2.3, 3.1]
-"""
+{REGIONS}"""
 TASK = "0001-statuette"
 
 
