@@ -1,7 +1,7 @@
 """Whole-arm inverse kinematics: put one or several hands' palm frames at poses with their arms (and the torso).
 
 Damped least squares on the stacked 6-D pose errors (log map of SE(3)), with an active set at the
-joint limits; cheap enough (~20 µs an iteration per arm) to run from several starts per target.
+joint limits; cheap enough to run from several starts per target.
 Two arms solved together share the torso, so neither undoes what the other needs.
 """
 from __future__ import annotations

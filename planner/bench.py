@@ -217,7 +217,7 @@ def _median(values: list) -> float:
     return float(np.median(values)) if values else float("nan")
 
 
-CHECK_SAMPLES = 500  # configurations a motion benchmark times a full check at, before and after its runs (about 0.1 s)
+CHECK_SAMPLES = 500  # configurations a motion benchmark times a full check at, before and after its runs
 
 
 def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int = 1) -> MotionBench:

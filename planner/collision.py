@@ -8,8 +8,8 @@ uniform samples are pruned. The pair set is computed once per robot spec and cac
 the two arms (hands included) are never pruned: the arms share a workspace, and uniform samples
 rarely bring the hands together. Robot-obstacle pairs collide within `env_padding` (a security
 margin, which the broad phase inflates its boxes by). A check runs pinocchio's naive broad phase (every
-pair of boxes, then the subset's pairs whose boxes meet): with some seventy geometries, measured over the
-motion step's checks, 10% faster than sweep-and-prune and 20% faster than a dynamic AABB tree.
+pair of boxes, then the subset's pairs whose boxes meet): with some seventy geometries it beat sweep-and-prune and
+a dynamic AABB tree over the motion step's checks (docs/benchmarks.md).
 """
 from __future__ import annotations
 
@@ -263,7 +263,7 @@ def build_collision_model(robot: Robot, environment: Environment = (), params: C
     for a, b in robot_pairs + env_pairs:
         gm.addCollisionPair(pin.CollisionPair(a, b))
     n_self = len(robot_pairs)
-    ends = np.array(robot_pairs + env_pairs, dtype=np.int64).reshape(-1, 2)  # as added (reading them back cost 14 ms)
+    ends = np.array(robot_pairs + env_pairs, dtype=np.int64).reshape(-1, 2)  # as added (reading them back from the model is slow)
     first, second = ends[:, 0], ends[:, 1]
     part = np.array(parts + ("env",) * (len(gm.geometryObjects) - n_robot))
     pa, pb = part[first], part[second]
@@ -333,8 +333,8 @@ def screen_of(cm: CollisionModel, subset: str | np.ndarray) -> Screen | None:
 
 class CollisionChecker:
     """Per-thread scratch data for one CollisionModel: one pinocchio collision data and broad-phase manager for all its
-    subsets and paddings, switched to the ones a check asks for (a few microseconds, against milliseconds and megabytes
-    for each more collision data, which a forked worker also has to copy). A subset is a name of the model's, or the
+    subsets and paddings, switched to the ones a check asks for (far cheaper than one more collision data, which a forked worker
+    also has to copy). A subset is a name of the model's, or the
     pair indices of one (of a model sharing this one's geometry and pairs: see CollisionModel.with_subsets)."""
 
     def __init__(self, cm: CollisionModel, data: pin.Data | None = None):

@@ -278,8 +278,8 @@ class PhasePlanner:
 
     def checker(self, model: CollisionModel) -> CollisionChecker:
         """The collision scratch data of a situation, shared by the validities and clearance meters of all its motions
-        (each pads and picks the pairs its own way): pinocchio's costs milliseconds to make, and megabytes a forked worker
-        must copy."""
+        (each pads and picks the pairs its own way): pinocchio's is costly to make, and a forked worker
+        must copy it."""
         if id(model.geometry) not in self.checkers:
             self.checkers[id(model.geometry)] = CollisionChecker(model, self.data)
         return self.checkers[id(model.geometry)]

@@ -143,7 +143,7 @@ def situation_base(cm: CollisionModel, shape: coal.CollisionGeometry, situation:
 def _moving_only(cm: CollisionModel, keep: np.ndarray) -> CollisionModel:
     """`cm` with the pairs `keep` (a flag per pair) alone in its geometry model (changed in place: situation_base's own
     copy), ordered as pinocchio orders them (by their two geometry indices), its subsets renumbered: no motion checks
-    another pair, and pinocchio's collision data of a model costs about 5 kB per pair to allocate and to free."""
+    another pair, and pinocchio's collision data of a model costs memory per pair to allocate and to free."""
     ends = np.sort(cm.ends[keep], axis=1)
     order = np.lexsort((ends[:, 1], ends[:, 0]))
     ends = ends[order]

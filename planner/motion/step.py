@@ -41,7 +41,7 @@ def hand_grasp(grasps: GraspList, rank: int) -> HandGrasp:
 @contextlib.contextmanager
 def collector_paused() -> Iterator[None]:
     """Python's cyclic garbage collector off inside (as it was on the way out): its full passes walk every object of the
-    long-lived models (about 50 ms per plan on the default task), and in a forked worker the walk copies the pages the
+    long-lived models, and in a forked worker the walk copies the pages the
     worker shares with its parent. A plan's few reference cycles are collected once it is done."""
     was = gc.isenabled()
     gc.disable()

@@ -101,7 +101,7 @@ class SegmentChecker:
     """Checks configurations and straight segments against named pair subsets (one per process); `coarse`: see the
     module (1: every configuration at the paddings). `checker`: collision scratch data to share with other segment
     checkers of the same geometry and pairs at other paddings (each passes its own with every check): pinocchio's
-    collision data costs milliseconds to make and megabytes to hold. `checks` counts this one's own checks."""
+    collision data is costly to make and to hold. `checks` counts this one's own checks."""
 
     def __init__(self, cm: CollisionModel, env_clearance: float, self_clearance: float = 0.0, object_clearance: float = 0.0,
                  radii: np.ndarray | None = None, coarse: int = 1, checker: CollisionChecker | None = None):
@@ -135,7 +135,7 @@ class SegmentChecker:
         """(rows, nq) the subset's displacement weights per joint (computed once per subset)."""
         if subset not in self._weights:
             rows = np.ascontiguousarray(self._per_pair[self.cm.subsets[subset]])
-            # distinct rows, found by their bytes (np.unique(axis=0) sorts lexicographically: ten times slower)
+            # distinct rows, found by their bytes (np.unique(axis=0) sorts lexicographically: much slower)
             _, first = np.unique(rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1]))).ravel(), return_index=True)
             self._weights[subset] = rows[np.sort(first)]
         return self._weights[subset]

@@ -77,7 +77,7 @@ def wrist_segments(roadmap: Roadmap) -> tuple[np.ndarray, np.ndarray]:
     """((k, 2, 3) segments, (k, 3) uint8 colours): each wrist's moves along the Super Graph's edges, each drawn once.
 
     A wrist that holds still (one-arm edge) draws nothing, and a move that several edges share (the same elementary
-    edge with the other arm anywhere: 42% of the example session's) is drawn once, in the colour of its most
+    edge with the other arm anywhere) is drawn once, in the colour of its most
     prominent edge (valid before invalid, then the largest component): software WebGL draws every line it is sent.
     """
     wrists = roadmap.wrists.shape[1]
