@@ -7,8 +7,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pinocchio as pin
 
-from .collision import build_collision_model
-from .task import Scene
+from planner.collision.checker import build_collision_model
+from planner.model.task import Scene
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ class DoubleGraspBench:
         return asdict(self)
 
     def render(self) -> str:
-        from .stages import stage_table
+        from planner.core.stages import stage_table
 
         totals = [sum(r.values()) for r in self.runs]
         out = [f"{'step':<16}{'first run s':>12}{'median s':>10}{'max s':>8}"]
@@ -109,8 +109,8 @@ class DoubleGraspBench:
 
 def bench_double_grasps(scene: Scene, seed: int, repeat: int, folder, progress=print) -> DoubleGraspBench:
     """Run arms and both grasp lists once (from the cache when there), then the online steps `repeat` times on branches."""
-    from .runner import run_pipeline
-    from .session import Session
+    from planner.core.runner import run_pipeline
+    from planner.core.session import Session
 
     base = Session.create(folder / "base", scene, seed)
     progress("arms and grasp lists (from the user cache when computed before) ...")
@@ -148,7 +148,7 @@ class MotionBench:
 
     def summary(self, planner: str) -> dict:
         """Medians over the seeds: total seconds, success fraction, and per phase Table I's figures."""
-        from .motion import PHASE_SECONDS, PHASES
+        from planner.motion import PHASE_SECONDS, PHASES
 
         runs, per = self.runs[planner], len(PHASE_SECONDS)
         phases = []
@@ -174,7 +174,7 @@ class MotionBench:
         """Medians over the seeds of the seconds spent in each kind of work, summed over the phases of the motion found
         ('other': the wall time minus the rest: the double grasps given up before it and setting up, less the time the
         phases' transits saved by running in parallel; the baseline's RRTConnect queries count as graph search)."""
-        from .motion import PHASE_SECONDS
+        from planner.motion import PHASE_SECONDS
 
         kinds, per = ("graph search", "validation", "RRT", "shortcutting", "contact motions"), len(PHASE_SECONDS)
         rows = {k: [] for k in (*kinds, "timing and sampling", "other")}
@@ -224,11 +224,11 @@ def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int =
     """The offline steps once (seed 0, from the cache when there); per seed the online steps, then the motion planned with
     the Super Graph and with RRTConnect alone from the same double grasps (rank order and contact motions are shared),
     `repeat` times each, the fastest run kept (the same seed gives the same motion: only its time varies)."""
-    from .motion import PHASES, MotionParams, plan_motion
-    from .pipeline import step_named
-    from .runner import run_pipeline
-    from .session import Session
-    from .steps import StepContext, step_seed
+    from planner.core.runner import run_pipeline
+    from planner.core.session import Session
+    from planner.core.steps import StepContext, step_seed
+    from planner.motion import PHASES, MotionParams, plan_motion
+    from planner.pipeline import step_named
 
     base = Session.create(folder / "base", scene, 0)
     progress("offline steps: grasp lists and roadmap (from the user cache when computed before) ...")

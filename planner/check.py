@@ -14,16 +14,16 @@ from dataclasses import dataclass
 import coal
 import numpy as np
 
-from .arms import ArmsParams, decide
-from .collision import CollisionModel, build_collision_model
-from .environment import Obstacle
-from .errors import RegraspError
-from .geometry import coal_mesh, transform3s
-from .hand_model import load_hand_model
-from .object_mesh import OBJECT_LIMITS, likely_unit
-from .reach import ReachResult, placement_reach
-from .robot_spec import HandSpec
-from .task import Scene
+from planner.collision.checker import CollisionModel, build_collision_model
+from planner.core.errors import RegraspError
+from planner.handover.arms import ArmsParams, decide
+from planner.handover.reach import ReachResult, placement_reach
+from planner.model.environment import Obstacle
+from planner.model.geometry import coal_mesh, transform3s
+from planner.model.hand_model import load_hand_model
+from planner.model.object_mesh import OBJECT_LIMITS, likely_unit
+from planner.model.robot_spec import HandSpec
+from planner.model.task import Scene
 
 RESTING_CONTACT = 0.003  # m: an object standing on a support may sink this deep into it
 OPENING_SAMPLES = 400  # finger configurations sampled per finger to measure a hand's largest opening

@@ -1,9 +1,11 @@
 """The pipeline: every step, in order. A new step plugs in by adding its STEP here."""
 from __future__ import annotations
 
-from . import arms, double_grasps, exchange, grasp_configs, grasps, motion, roadmap
-from .errors import RegraspError
-from .steps import Step
+from planner import motion, roadmap
+from planner.core.errors import RegraspError
+from planner.core.steps import Step
+from planner.grasping import grasp_list as grasps
+from planner.handover import arms, double_grasps, exchange, grasp_configs
 
 PIPELINE: tuple[Step, ...] = (arms.STEP, grasps.PICK_STEP, grasps.PLACE_STEP, grasp_configs.STEP, exchange.STEP, double_grasps.STEP,
                               roadmap.STEP, motion.STEP)

@@ -11,14 +11,14 @@ os.environ.setdefault("REGRASP_CACHE", tempfile.mkdtemp(prefix="regrasp-test-cac
 
 @pytest.fixture(scope="session")
 def default_scene():
-    from planner.task import load_task
+    from planner.model.task import load_task
 
     return load_task("default")
 
 
 @pytest.fixture(scope="session")
 def default_collision(default_scene):
-    from planner.collision import build_collision_model
+    from planner.collision.checker import build_collision_model
 
     return build_collision_model(default_scene.robot, default_scene.environment)
 

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from planner.shapes import generate, obj_text
+from planner.model.shapes import generate, obj_text
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TASK = ROOT / "assets" / "tasks" / "default.toml"
@@ -26,7 +26,7 @@ SUCCESS_RATE = 0.85  # issue 13: at least this fraction of (object, placement) p
 # On the desk only grasps from above are clear of it (fingertips kept 1 cm off): an object lying flat keeps few of them,
 # and the grasp steps search it again with more orientations (GraspParams.min_clear). Two Allegro hands still do not fit
 # together on a compact object (a 10 cm cube, a squat cylinder).
-OBJECTS: dict[str, tuple[str, dict]] = {  # name -> (shape in planner/shapes.py, its parameters)
+OBJECTS: dict[str, tuple[str, dict]] = {  # name -> (shape in planner/model/shapes.py, its parameters)
     "box_long": ("box", {"size": (0.22, 0.06, 0.07)}),
     "box_tall": ("box", {"size": (0.08, 0.08, 0.18)}),
     "cylinder_tall": ("cylinder", {"radius": 0.03, "height": 0.20}),
@@ -77,11 +77,11 @@ def write_task(object_path: Path, placement: str, folder: Path) -> Path:
 
 def plan_outcome(task: Path, out: Path, seed: int = 0) -> str:
     """'N double grasps', or the failing step and its message, of `plan --until double-grasps` on a task."""
-    from planner.errors import RegraspError
-    from planner.runner import run_pipeline
-    from planner.session import Session
-    from planner.steps import StepFailed
-    from planner.task import load_task
+    from planner.core.errors import RegraspError
+    from planner.core.runner import run_pipeline
+    from planner.core.session import Session
+    from planner.core.steps import StepFailed
+    from planner.model.task import load_task
 
     try:
         session = Session.create(out, load_task(task), seed, force=True)

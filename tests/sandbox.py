@@ -10,8 +10,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from planner.paths import PROJECT_ROOT
-from planner.session import MANIFEST
+from planner.core.paths import PROJECT_ROOT
+from planner.core.session import MANIFEST
 
 EXAMPLE = PROJECT_ROOT / "sessions" / "default-example"
 ESCAPE = "../" * 24  # from any folder of a realistic depth, enough `..` to reach the root

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.arm_ik import ArmIK
-from planner.exchange_grid import PalmWaypoints, best_nodes, exchange_costs, grid_nodes
+from planner.handover.arm_ik import ArmIK
+from planner.handover.exchange_grid import PalmWaypoints, best_nodes, exchange_costs, grid_nodes
 
 
 def test_ik_reaches_poses_of_random_configurations(default_scene):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from sandbox import forbid, regrasp, snapshot
 
-from planner.task import Scene
+from planner.model.task import Scene
 
 
 @dataclass(frozen=True)
@@ -27,7 +27,7 @@ class Entry:
 
 
 def _grasps(scene: Scene) -> Any:
-    from planner.grasps import GraspParams, grasp_list
+    from planner.grasping.grasp_list import GraspParams, grasp_list
 
     return grasp_list(scene.robot.spec, "right", scene.object_mesh, GraspParams(positions=3, orientations=3), 0, workers=1)[0]
 
@@ -39,7 +39,7 @@ def _roadmap(scene: Scene) -> Any:
 
 
 def _pairs(scene: Scene) -> Any:
-    from planner.collision import (
+    from planner.collision.checker import (
         CollisionParams,
         robot_pair_set,
         simplified_robot_geometry,
@@ -49,27 +49,28 @@ def _pairs(scene: Scene) -> Any:
 
 
 def _workspaces(scene: Scene) -> Any:
-    from planner.finger_workspace import WorkspaceParams, hand_workspaces
-    from planner.hand_model import load_hand_model
+    from planner.grasping.finger_workspace import WorkspaceParams, hand_workspaces
+    from planner.model.hand_model import load_hand_model
 
     return hand_workspaces(load_hand_model(scene.robot.spec.arm("right").hand), WorkspaceParams(samples_per_joint=5))
 
 
 def _object(scene: Scene) -> Any:
-    from planner.object_model import object_model
+    from planner.grasping.object_model import object_model
 
     return object_model(scene.object_mesh, 0.006)
 
 
 ENTRIES = {
     "grasps": Entry("grasps", "grasp list of the right hand", _grasps,
-                    lambda g: g.to_json(0.0), "planner.grasps.compute_grasp_list"),
+                    lambda g: g.to_json(0.0), "planner.grasping.grasp_list.compute_grasp_list"),
     "roadmaps": Entry("roadmaps", "roadmap", _roadmap, lambda r: (r.node_q.tolist(), r.edges.tolist()),
                       "planner.roadmap.step.build_roadmap"),
-    "collision_pairs": Entry("collision_pairs", "self-collision pair set", _pairs, lambda p: p, "planner.collision.compute_pair_set"),
+    "collision_pairs": Entry("collision_pairs", "self-collision pair set", _pairs, lambda p: p,
+                             "planner.collision.checker.compute_pair_set"),
     "workspaces": Entry("workspaces", "workspaces", _workspaces, lambda ws: [w.centres.tolist() for w in ws],
-                        "planner.finger_workspace.finger_workspace"),
-    "objects": Entry("objects", "objects", _object, lambda o: o.points.tolist(), "planner.object_model.build_object_model"),
+                        "planner.grasping.finger_workspace.finger_workspace"),
+    "objects": Entry("objects", "objects", _object, lambda o: o.points.tolist(), "planner.grasping.object_model.build_object_model"),
 }
 
 

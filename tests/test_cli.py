@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from planner.paths import PROJECT_ROOT
+from planner.core.paths import PROJECT_ROOT
 from planner.pipeline import PIPELINE
 from workbench.cli import main, parser, task_argument
 from workbench.progress import Bars
@@ -48,7 +48,7 @@ def test_check_bad_task_is_a_clear_error(tmp_path):
 
 
 def test_check_reports_a_task_that_needs_no_regrasp(tmp_path):
-    from planner.paths import ASSETS
+    from planner.core.paths import ASSETS
 
     text = (ASSETS / "tasks" / "default.toml").read_text()
     moved = text.replace("final = { xyz = [0.50, 0.85, 0.72]", "final = { xyz = [0.50, -0.70, 0.72]")

@@ -6,9 +6,9 @@ import pinocchio as pin
 import pytest
 from sandbox import forbid
 
-from planner.collision import CollisionParams, _candidate_pairs, compute_pair_set, robot_pair_set, simplified_robot_geometry
-from planner.geometry import se3
-from planner.reach import reach
+from planner.collision.checker import CollisionParams, _candidate_pairs, compute_pair_set, robot_pair_set, simplified_robot_geometry
+from planner.handover.reach import reach
+from planner.model.geometry import se3
 
 
 def _full_mesh_model(scene, cm):
@@ -93,7 +93,7 @@ def test_pair_set_is_deterministic_and_cached(default_scene, tmp_path, monkeypat
     monkeypatch.setenv("REGRASP_CACHE", str(tmp_path))
     c = robot_pair_set(robot, gm, params)
     assert list(tmp_path.rglob("*.json")), "the pair set was not cached"
-    forbid(monkeypatch, "planner.collision.compute_pair_set")
+    forbid(monkeypatch, "planner.collision.checker.compute_pair_set")
     assert robot_pair_set(robot, gm, params) == c == a
 
 
@@ -129,9 +129,9 @@ def test_pair_ends_are_the_geometry_models_pairs(default_collision):
 
 def test_environment_padding(default_scene):
     """A robot link closer to an obstacle than the padding collides; farther away it does not."""
-    from planner.collision import build_collision_model
-    from planner.environment import Obstacle
-    from planner.geometry import pose
+    from planner.collision.checker import build_collision_model
+    from planner.model.environment import Obstacle
+    from planner.model.geometry import pose
 
     robot = default_scene.robot
     data = robot.model.createData()
@@ -156,9 +156,9 @@ def test_environment_padding(default_scene):
 def test_pairs_the_robot_spec_allows_are_never_checked():
     """Baxter's spec allows each upper-arm cover to touch its forearm (the cover's cylinder reaches past the elbow): no
     such pair is a candidate, and the count says how many were left out."""
-    from planner.collision import geometry_link
-    from planner.robot import load_robot
-    from planner.robot_spec import load_robot_spec
+    from planner.collision.checker import geometry_link
+    from planner.model.robot import load_robot
+    from planner.model.robot_spec import load_robot_spec
 
     robot = load_robot(load_robot_spec("baxter_allegro.toml").source)
     gm = simplified_robot_geometry(robot)

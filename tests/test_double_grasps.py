@@ -13,10 +13,10 @@ import pytest
 import trimesh
 from oracle import Oracle
 
-from planner.exchange_grid import PalmWaypoints, exchange_costs
-from planner.paths import ASSETS
-from planner.runner import run_pipeline
-from planner.session import Session
+from planner.core.paths import ASSETS
+from planner.core.runner import run_pipeline
+from planner.core.session import Session
+from planner.handover.exchange_grid import PalmWaypoints, exchange_costs
 
 SEED = 3  # as the session tests: the grasp lists come from the shared test cache
 POSITION_TOL, ROTATION_TOL = 2e-3, 2e-2  # the step's IK tolerances
@@ -113,7 +113,7 @@ def test_same_seed_same_double_grasps(planned, tmp_path):
 
 def test_exchange_ik_runs_with_the_sessions_grasp_config_parameters(planned, tmp_path, monkeypatch):
     """`--set grasp_configs.<p>` reaches the double grasps' exchange IK (only its torso_sigma is the double grasps' own)."""
-    import planner.double_grasps as step
+    import planner.handover.double_grasps as step
 
     seen = []
 

@@ -12,8 +12,8 @@ from generated_objects import (
     succeeded,
 )
 
-from planner.object_mesh import load_object_mesh
-from planner.statuette import STATUETTE_PATH
+from planner.model.object_mesh import load_object_mesh
+from planner.model.statuette import STATUETTE_PATH
 
 pytestmark = pytest.mark.slow
 SEED = 3  # the session tests' seed: grasp lists of the same hand and object come from the shared test cache

@@ -13,11 +13,11 @@ import trimesh
 from sandbox import forbid
 from scipy.optimize import linprog
 
-from planner.grasp_quality import tangent_bases
-from planner.grasps import GraspList, GraspParams, compute_grasp_list, grasp_list
-from planner.results import load_result, save_result
-from planner.robot import _load
-from planner.robot_spec import load_robot_spec
+from planner.core.results import load_result, save_result
+from planner.grasping.grasp_list import GraspList, GraspParams, compute_grasp_list, grasp_list
+from planner.grasping.quality import tangent_bases
+from planner.model.robot import _load
+from planner.model.robot_spec import load_robot_spec
 from workbench.cli import main
 
 SMALL = GraspParams(positions=30, orientations=40)
@@ -172,7 +172,7 @@ def test_lists_are_cached_by_hand_mesh_parameters_and_seed(default_scene, monkey
     p = GraspParams(positions=4, orientations=6)
     first, cached = grasp_list(spec, "left", mesh, p, seed=0, workers=1)
     with monkeypatch.context() as m:
-        forbid(m, "planner.grasps.compute_grasp_list")
+        forbid(m, "planner.grasping.grasp_list.compute_grasp_list")
         again, cached_again = grasp_list(spec, "left", mesh, p, seed=0, workers=1)
     assert not cached and cached_again and again.to_json(0.0) == first.to_json(0.0)
     assert not grasp_list(spec, "left", mesh, p, seed=1, workers=1)[1]
@@ -216,9 +216,9 @@ def test_default_lists_have_50_force_closed_grasps(tmp_path, hand):
 def test_few_grasps_clear_of_the_support_make_the_step_search_denser(tmp_path, min_clear, densified):
     """The place step counts its list's grasps clear of the obstacles at the final placement and, with fewer than
     `min_clear`, searches again with `densify` times the orientations (a small search keeps the test quick)."""
-    from planner.runner import run_pipeline
-    from planner.session import Session
-    from planner.task import load_task
+    from planner.core.runner import run_pipeline
+    from planner.core.session import Session
+    from planner.model.task import load_task
 
     small = {"positions": 16, "orientations": 8, "min_clear": min_clear, "densify": 3}
     session = Session.create(tmp_path / "s", load_task("default"), 0)

@@ -7,12 +7,12 @@ import pytest
 import trimesh
 from sandbox import forbid
 
-from planner.finger_workspace import WorkspaceParams, finger_workspace, hand_workspaces, sphere_hierarchy
-from planner.grasp_frames import box_grid, hopf_rotations
-from planner.hand_model import load_hand_model
-from planner.object_model import build_object_model, object_model, vertex_mean_curvature
-from planner.robot import _load
-from planner.robot_spec import load_robot_spec
+from planner.grasping.finger_workspace import WorkspaceParams, finger_workspace, hand_workspaces, sphere_hierarchy
+from planner.grasping.frames import box_grid, hopf_rotations
+from planner.grasping.object_model import build_object_model, object_model, vertex_mean_curvature
+from planner.model.hand_model import load_hand_model
+from planner.model.robot import _load
+from planner.model.robot_spec import load_robot_spec
 
 
 @pytest.fixture(scope="module")
@@ -103,7 +103,7 @@ def test_sphere_hierarchy_stop_rules():
 
 def test_workspaces_are_cached_per_hand(hand, monkeypatch):
     first = hand_workspaces(hand)
-    forbid(monkeypatch, "planner.finger_workspace.finger_workspace")
+    forbid(monkeypatch, "planner.grasping.finger_workspace.finger_workspace")
     again = hand_workspaces(hand)
     for a, b in zip(first, again):
         assert np.array_equal(a.centres, b.centres) and np.array_equal(a.occupied, b.occupied)
@@ -131,7 +131,7 @@ def test_mean_curvature_is_signed():
 def test_object_models_are_cached_per_mesh_and_step(monkeypatch):
     box = trimesh.creation.box(extents=[0.1, 0.1, 0.1])
     built = object_model(box, 0.01)
-    forbid(monkeypatch, "planner.object_model.build_object_model")
+    forbid(monkeypatch, "planner.grasping.object_model.build_object_model")
     assert np.array_equal(built.points, object_model(box, 0.01).points)
 
 

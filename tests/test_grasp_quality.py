@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from planner.grasp_quality import contact_wrenches, curvature_score, ellipsoid_alignment, force_closure, hull_epsilon, tangent_bases
+from planner.grasping.quality import contact_wrenches, curvature_score, ellipsoid_alignment, force_closure, hull_epsilon, tangent_bases
 
 
 def _equator(angles_deg, radius=0.05):

@@ -38,7 +38,7 @@ if scenario == "read-only":
     out["plan"] = cli("plan", "default", "--out", str(mnt / "out" / "s"), "--until", "arms")
     out["export"] = cli("export", example, "--html", str(mnt / "out" / "x.html"))
 else:  # full: a session with three finished steps on a disk with FREE bytes left
-    from planner.session import Session
+    from planner.core.session import Session
     from workbench.session_store import save_copy
 
     session = Session.open(example).branch(mnt / "s", before="grasp_configs")

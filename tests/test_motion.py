@@ -22,9 +22,9 @@ import pytest
 from generated_objects import TASK_TEXT_ROBOT
 from oracle import Oracle
 
-from planner.runner import run_pipeline
-from planner.session import Session
-from planner.task import load_task
+from planner.core.runner import run_pipeline
+from planner.core.session import Session
+from planner.model.task import load_task
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
 pytestmark = pytest.mark.slow

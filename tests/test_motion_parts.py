@@ -175,11 +175,11 @@ def test_vertex_shortcuts_jump_to_the_farthest_reachable_vertex_and_check_each_k
 
 def _phase_planner(scene, roadmap, baseline: bool = False):
     """The phase planner of a scene on the roadmap, with the default parameters and seed 0."""
-    from planner.collision import build_collision_model
+    from planner.collision.checker import build_collision_model
+    from planner.collision.validity import transit_profile
     from planner.motion.graph import MotionGraph
     from planner.motion.phases import PhasePlanner
     from planner.motion.step import contact_profile
-    from planner.motion.validity import transit_profile
 
     p = MotionParams()
     return PhasePlanner(scene, build_collision_model(scene.robot, scene.environment), MotionGraph(roadmap),
@@ -189,7 +189,7 @@ def _phase_planner(scene, roadmap, baseline: bool = False):
 
 @pytest.fixture(scope="module")
 def example(tmp_path_factory):
-    from planner.session import Session
+    from planner.core.session import Session
 
     folder = tmp_path_factory.mktemp("motion") / "example"
     shutil.copytree(EXAMPLE, folder)
@@ -199,12 +199,12 @@ def example(tmp_path_factory):
 
 @pytest.mark.slow
 def test_lazy_transit_goes_around_the_object(example):
-    from planner.collision import build_collision_model
-    from planner.geometry import coal_mesh
+    from planner.collision.checker import build_collision_model
+    from planner.collision.situation import Situation, situation_model
+    from planner.collision.validity import make_validity, transit_profile
+    from planner.model.geometry import coal_mesh
     from planner.motion.graph import MotionGraph
-    from planner.motion.situation import Situation, situation_model
     from planner.motion.transit import LazyTransit, TransitStats
-    from planner.motion.validity import make_validity, transit_profile
 
     scene, roadmap, _ = example
     robot = scene.robot
@@ -256,12 +256,12 @@ def test_rrt_reconnects_what_the_graph_cannot(example):
     path joins the graph."""
     import dataclasses
 
-    from planner.collision import build_collision_model
-    from planner.geometry import coal_mesh
+    from planner.collision.checker import build_collision_model
+    from planner.collision.situation import Situation, situation_model
+    from planner.collision.validity import make_validity, transit_profile
+    from planner.model.geometry import coal_mesh
     from planner.motion.graph import MotionGraph
-    from planner.motion.situation import Situation, situation_model
     from planner.motion.transit import LazyTransit, TransitStats
-    from planner.motion.validity import make_validity, transit_profile
 
     scene, roadmap, _ = example
     robot = scene.robot
@@ -290,12 +290,12 @@ def carried(example):
     free at both ends but hit along the path the graph returns for the robot alone."""
     import pinocchio as pin
 
-    from planner.collision import build_collision_model
-    from planner.geometry import coal_mesh
+    from planner.collision.checker import build_collision_model
+    from planner.collision.situation import Situation, situation_model
+    from planner.collision.validity import make_validity, transit_profile
+    from planner.model.geometry import coal_mesh
     from planner.motion.graph import MotionGraph
-    from planner.motion.situation import Situation, situation_model
     from planner.motion.transit import LazyTransit, TransitStats
-    from planner.motion.validity import make_validity, transit_profile
 
     scene, roadmap, _ = example
     robot = scene.robot
@@ -337,8 +337,8 @@ def carried(example):
 
 def _carried_validity(case):
     """The planner's validity of the carried case (its model as `situation.situation_model` makes it at the call)."""
-    from planner.motion.situation import Situation, situation_model
-    from planner.motion.validity import make_validity
+    from planner.collision.situation import Situation, situation_model
+    from planner.collision.validity import make_validity
 
     c = case
     return make_validity(situation_model(c["cm"], c["shape"], Situation(c["arm"], c["hold"]), (), c["idx"]), c["profile"], "moving")
@@ -383,8 +383,8 @@ def _probe_beside_the_robot(scene, case, path: np.ndarray):
     collision model, the case's validity in it) such that the validity passes the path: the robot itself never comes
     near the ball. Tried from the path's middle outwards, the object's points farthest from the palm first; None when
     none is found."""
-    from planner.collision import build_collision_model
-    from planner.environment import Obstacle
+    from planner.collision.checker import build_collision_model
+    from planner.model.environment import Obstacle
 
     dense = np.concatenate([np.linspace(a, b, 8, endpoint=False) for a, b in zip(path[:-1], path[1:])])
     order = np.argsort(np.abs(np.arange(len(dense)) - len(dense) / 2), kind="stable")
@@ -412,7 +412,7 @@ def test_the_independent_check_catches_a_checker_blind_to_the_carried_object(exa
     carried it through)."""
     import dataclasses
 
-    import planner.motion.situation as situation
+    import planner.collision.situation as situation
 
     original = situation.situation_model
 
@@ -443,10 +443,10 @@ def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
 
     import pinocchio as pin
 
-    from planner.environment import Obstacle
-    from planner.motion.situation import Situation, fingertip_geometries
+    from planner.collision.situation import Situation, fingertip_geometries
+    from planner.core.session import Session
+    from planner.model.environment import Obstacle
     from planner.motion.step import hand_grasp
-    from planner.session import Session
 
     scene, roadmap, _ = example
     session = Session.open(EXAMPLE)
@@ -548,9 +548,9 @@ def test_paddings_fitted_pair_by_pair():
     of the segments that move it relative to its partner."""
     import pinocchio as pin
 
-    from planner.collision import build_collision_model
-    from planner.motion.validity import Clearances, far, make_validity, transit_profile
-    from planner.task import find_task, load_task
+    from planner.collision.checker import build_collision_model
+    from planner.collision.validity import Clearances, far, make_validity, transit_profile
+    from planner.model.task import find_task, load_task
 
     scene = load_task(find_task("default"))
     robot = scene.robot
@@ -598,11 +598,11 @@ def test_clearances_measure_exactly_the_pairs_nearer_than_far():
     the rest pose, the statuette static on the desk and screened by its hull."""
     import pinocchio as pin
 
-    from planner.collision import build_collision_model
-    from planner.geometry import coal_convex, coal_mesh
-    from planner.motion.situation import Situation, situation_model
-    from planner.motion.validity import Clearances, far, transit_profile
-    from planner.task import find_task, load_task
+    from planner.collision.checker import build_collision_model
+    from planner.collision.situation import Situation, situation_model
+    from planner.collision.validity import Clearances, far, transit_profile
+    from planner.model.geometry import coal_convex, coal_mesh
+    from planner.model.task import find_task, load_task
 
     scene = load_task(find_task("default"))
     robot = scene.robot
@@ -634,10 +634,10 @@ def test_transit_checks_count_every_collision_check_of_the_transit(example, monk
     """Table I's transit checks are every collision check a transit makes, counted apart from the planner's own tally:
     each call of the collision checker while the transit runs. The example's Rest transit, from where the placing hand
     retreated (near the object: some pairs checked densely) to the final configuration."""
-    from planner.collision import CollisionChecker
+    from planner.collision.checker import CollisionChecker
+    from planner.collision.situation import Situation
+    from planner.core.session import Session
     from planner.motion.result import PHASES
-    from planner.motion.situation import Situation
-    from planner.session import Session
 
     scene, roadmap, _ = example
     robot = scene.robot
@@ -659,10 +659,10 @@ def test_the_carry_transit_can_use_the_roadmap_nodes(example):
     validity of the whole Carry transit pads those pairs as its two ends allow, so roadmap nodes near its start are
     valid there (with those pairs at the transit padding, none was, and the graph went unused). The example's Carry
     transit: the samples of phase Carry where no hand works at the object, the picking arm holding it."""
+    from planner.collision.situation import Situation
+    from planner.core.session import Session
     from planner.motion.result import PHASES
-    from planner.motion.situation import Situation
     from planner.motion.space import JointSpace
-    from planner.session import Session
 
     scene, roadmap, _ = example
     robot = scene.robot
@@ -687,10 +687,10 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
     there checked graded cost a fraction of the checks at paddings fitted to the 3 mm throughout, and each one it passes
     keeps the hand off the statuette by the independent check at ten times the fitted resolution. Its paddings must be
     ordered."""
+    from planner.collision.situation import OBJECT, Situation
+    from planner.collision.validity import Graded
+    from planner.core.session import Session
     from planner.motion.result import PHASES
-    from planner.motion.situation import OBJECT, Situation
-    from planner.motion.validity import Graded
-    from planner.session import Session
 
     scene, roadmap, _ = example
     motion = Session.open(EXAMPLE).result("motion")
@@ -745,12 +745,12 @@ def test_the_hull_screen_changes_no_answer(example):
     configurations hit the hull and not the statuette (counted with a model whose object is the hull itself)."""
     import coal
 
-    from planner.collision import build_collision_model
-    from planner.geometry import coal_convex, coal_mesh
+    from planner.collision.checker import build_collision_model
+    from planner.collision.situation import Situation, situation_model
+    from planner.collision.validity import make_validity, transit_profile
+    from planner.core.session import Session
+    from planner.model.geometry import coal_convex, coal_mesh
     from planner.motion.result import PHASES
-    from planner.motion.situation import Situation, situation_model
-    from planner.motion.validity import make_validity, transit_profile
-    from planner.session import Session
 
     scene, roadmap, _ = example
     robot = scene.robot

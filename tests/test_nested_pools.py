@@ -5,10 +5,10 @@ import subprocess
 import sys
 import textwrap
 
-from planner.forked import available_cpus, cpu_budget, executor, forked_map
+from planner.core.forked import available_cpus, cpu_budget, executor, forked_map
 
 REPRODUCTION = textwrap.dedent("""
-    from planner.forked import worker_pool, forked_map
+    from planner.core.forked import worker_pool, forked_map
 
     def inner(_):
         return forked_map(abs, [-1, -2, -3], workers=2)   # a job that uses worker processes itself, as a suite task does

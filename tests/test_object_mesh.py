@@ -1,4 +1,4 @@
-"""Tests of object-mesh loading (planner.object_mesh) and of the generated statuette (planner.statuette)."""
+"""Tests of object-mesh loading (planner.model.object_mesh) and of the generated statuette (planner.model.statuette)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from planner.errors import InputError
-from planner.object_mesh import load_object_mesh
-from planner.statuette import STATUETTE_PATH
+from planner.core.errors import InputError
+from planner.model.object_mesh import load_object_mesh
+from planner.model.statuette import STATUETTE_PATH
 
 FORMATS = ["obj", "stl", "ply", "off", "glb"]
 
@@ -62,7 +62,7 @@ def test_statuette_stands_on_its_feet_at_the_origin() -> None:
 def test_make_statuette_is_deterministic_and_matches_the_committed_file() -> None:
     pytest.importorskip("manifold3d")
     pytest.importorskip("fast_simplification")
-    from planner.statuette import make_statuette
+    from planner.model.statuette import make_statuette
 
     a, b = make_statuette(), make_statuette()
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
@@ -74,7 +74,7 @@ def test_make_statuette_is_deterministic_and_matches_the_committed_file() -> Non
 def test_write_statuette_writes_a_loadable_obj(tmp_path: Path) -> None:
     pytest.importorskip("manifold3d")
     pytest.importorskip("fast_simplification")
-    from planner.statuette import write_statuette
+    from planner.model.statuette import write_statuette
 
     path = write_statuette(tmp_path / "sub" / "horse.obj")
     assert path.is_file()

@@ -144,7 +144,7 @@ def test_sigterm_of_the_workbench_stops_a_running_steps_workers(started) -> None
 
 def test_worker_pool_kills_its_workers_when_the_caller_raises() -> None:
     """In process: an exception (Ctrl-C, SIGTERM) in the parent kills the pool's workers instead of waiting for their jobs."""
-    from planner.forked import worker_pool
+    from planner.core.forked import worker_pool
 
     before, threads = _children(os.getpid()), set(threading.enumerate())
     with pytest.raises(KeyboardInterrupt), worker_pool(2) as pool:
@@ -162,7 +162,7 @@ def test_worker_pool_kills_its_workers_when_the_caller_raises() -> None:
 def test_sigterm_while_a_pool_forks_kills_every_worker() -> None:
     """SIGTERM right after a pool's second fork (before CPython enters that worker in the pool's map): the pool has killed
     and reaped both workers when the exception leaves it (a worker left to die later outlived `regrasp plan` in CI)."""
-    from planner.forked import Terminated, sigterm_unwinds, worker_pool
+    from planner.core.forked import Terminated, sigterm_unwinds, worker_pool
 
     before = _children(os.getpid())
     forked: list[set[int]] = []
@@ -189,7 +189,7 @@ def test_sigterm_while_a_pool_forks_kills_every_worker() -> None:
 def test_a_stopped_thread_starts_no_new_pool() -> None:
     """stop_pools between two of a thread's pools (none live to kill): the thread's next pool is refused, not forked (at
     exit CPython waits for every pool's jobs: a stopped workbench stayed up for minutes)."""
-    from planner.forked import Stopped, stop_pools, worker_pool
+    from planner.core.forked import Stopped, stop_pools, worker_pool
 
     before, stopped, outcome = _children(os.getpid()), threading.Event(), []
 

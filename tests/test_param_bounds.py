@@ -15,14 +15,14 @@ import pytest
 from sandbox import EXAMPLE, one_error_line
 from test_workbench_browser import _free_port
 
-from planner.bounds import SEED
-from planner.errors import InputError, RegraspError
-from planner.exchange_grid import MAX_GRID_NODES, grid_nodes
-from planner.paths import DEFAULT_TASK
+from planner.core.bounds import SEED
+from planner.core.errors import InputError, RegraspError
+from planner.core.paths import DEFAULT_TASK
+from planner.core.session import MANIFEST, Session
+from planner.core.steps import param_bounds
+from planner.handover.exchange_grid import MAX_GRID_NODES, grid_nodes
+from planner.model.task import load_task
 from planner.pipeline import PIPELINE
-from planner.session import MANIFEST, Session
-from planner.steps import param_bounds
-from planner.task import load_task
 from workbench.app import Workbench
 from workbench.cli import main, params_text
 
@@ -32,7 +32,7 @@ def _forbid_runs(monkeypatch: pytest.MonkeyPatch) -> None:
     def ran(*args: Any, **kwargs: Any) -> Any:
         raise AssertionError("the pipeline ran with a value it should have refused")
 
-    monkeypatch.setattr("planner.runner.run_pipeline", ran)
+    monkeypatch.setattr("planner.core.runner.run_pipeline", ran)
     monkeypatch.setattr("planner.roadmap.roadmap_for", ran)
 
 
@@ -86,7 +86,7 @@ def test_set_out_of_range_is_one_line_before_any_folder(tmp_path: Path, capsys: 
 def test_options_that_set_a_parameter_check_its_range(capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch,
                                                       args: list[str], message: str) -> None:
     _forbid_runs(monkeypatch)
-    monkeypatch.setattr("planner.grasps.grasp_list", lambda *a, **k: pytest.fail("the grasp list was computed"))
+    monkeypatch.setattr("planner.grasping.grasp_list.grasp_list", lambda *a, **k: pytest.fail("the grasp list was computed"))
     assert main(args) == 2
     assert message in one_error_line(capsys.readouterr().err)
 
@@ -204,7 +204,7 @@ def test_workbench_refuses_a_seed_out_of_range(workbench: Workbench) -> None:
 
 def test_transit_paddings_below_the_roadmaps_clearances_are_a_user_error() -> None:
     """Two steps' parameters meet here (the roadmap's recorded clearance, the motion's paddings): one line naming them."""
-    from planner.motion.validity import transit_profile
+    from planner.collision.validity import transit_profile
 
     with pytest.raises(RegraspError, match=r"step 'motion': parameters transit_env_padding \(0.03 m\) and transit_self_padding "
                                            r"\(0.015 m\) must exceed the roadmap's clearances \(0.05 m, 0 m\)"):

@@ -12,13 +12,13 @@ import pytest
 from oracle import Oracle
 from sandbox import forbid
 
-from planner.environment import Obstacle
-from planner.geometry import pose
-from planner.results import save_result
+from planner.collision.segments import SegmentChecker, coarse_first, two_level, van_der_corput
+from planner.core.results import save_result
+from planner.model.environment import Obstacle
+from planner.model.geometry import pose
 from planner.roadmap import Roadmap, RoadmapParams, RoadmapPlanner, roadmap_for
 from planner.roadmap import build as roadmap_build
 from planner.roadmap.build import build_roadmap, roadmap_collision_model, segment_checker
-from planner.roadmap.local_planner import SegmentChecker, coarse_first, two_level, van_der_corput
 from planner.roadmap.step import session_roadmap_seed
 from planner.roadmap.super_graph import components, edge_candidates, node_candidates
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.paths import ASSETS, robot_data_file
-from planner.robot import load_robot
-from planner.robot_spec import load_robot_spec
+from planner.core.paths import ASSETS, robot_data_file
+from planner.model.robot import load_robot
+from planner.model.robot_spec import load_robot_spec
 
 # The same resolved paths a task file resolves to, so load_robot's cache is shared with the task tests.
 ALEX = ASSETS / "robots" / "alex_allegro.toml"

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.errors import InputError, RegraspError
+from planner.core.errors import InputError, RegraspError
+from planner.core.runner import KILL_AFTER, run_pipeline
+from planner.core.session import MANIFEST, Session
 from planner.pipeline import PIPELINE
-from planner.runner import KILL_AFTER, run_pipeline
-from planner.session import MANIFEST, Session
 
 
 def _same(a, b) -> bool:
@@ -231,7 +231,7 @@ def test_branch_keeps_the_original(planned, tmp_path):
 
 def test_session_records_the_task_by_name_or_relative_path(tmp_path, default_scene):
     """session.json never holds an absolute path of the machine that wrote it; old sessions that do still load."""
-    from planner.task import load_task
+    from planner.model.task import load_task
 
     named = Session.create(tmp_path / "named", default_scene, seed=0)
     assert json.loads((named.folder / MANIFEST).read_text())["task_source"] == "default"

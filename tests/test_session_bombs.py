@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from sandbox import copy_example, one_error_line, regrasp
 
-from planner.errors import InputError
-from planner.npz import MAX_ARRAY_BYTES
-from planner.object_mesh import MAX_FACES
-from planner.session import MESHES, Session
+from planner.core.errors import InputError
+from planner.core.npz import MAX_ARRAY_BYTES
+from planner.core.session import MESHES, Session
+from planner.model.object_mesh import MAX_FACES
 
 MEMORY = 2 * 2**30
 LIMITED = ("prlimit", f"--as={MEMORY}")  # the address space of the export process: above it an allocation fails
@@ -163,7 +163,7 @@ def test_the_arrays_of_all_a_sessions_files_share_one_budget(session: Path, monk
     sizes = {p.name: sum(i.file_size for i in zipfile.ZipFile(p).infolist()) for p in session.glob("*.npz")}
     limit = 3 * 2**20
     assert max(sizes.values()) < limit < sum(sizes.values())
-    monkeypatch.setattr("planner.npz.MAX_READ_BYTES", limit)
+    monkeypatch.setattr("planner.core.npz.MAX_READ_BYTES", limit)
     err = _open_error(session)
     assert err.source.endswith(".npz") and Path(err.source).parent == session
     assert f"{limit:,} bytes allowed for one session" in err.detail, err.detail

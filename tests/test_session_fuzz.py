@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 from sandbox import EXAMPLE, copy_example, escaping, snapshot
 
-from planner.errors import InputError
-from planner.paths import ASSETS
-from planner.session import MANIFEST, Session
+from planner.core.errors import InputError
+from planner.core.paths import ASSETS
+from planner.core.session import MANIFEST, Session
 
 MUTATIONS = 240
 SEED = 20261130

@@ -19,13 +19,13 @@ import pytest
 from PIL import Image
 
 from planner.check import check_task
-from planner.errors import InputError
+from planner.core.errors import InputError
+from planner.core.tomlread import load_toml
+from planner.core.user_cache import computing
+from planner.model.task import find_task, load_task
 from planner.suite.generate import generate_tasks
 from planner.suite.spec import load_suite
 from planner.suite.toml_text import toml_text
-from planner.task import find_task, load_task
-from planner.tomlread import load_toml
-from planner.user_cache import computing
 from workbench.cli import main
 from workbench.suite_report import write_report
 

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.errors import InputError
-from planner.paths import ASSETS, robot_data_file
-from planner.robot import build_robot, load_robot
-from planner.robot_spec import RESERVED_NAMES, load_robot_spec
-from planner.task import load_task, scene_from_dict
+from planner.core.errors import InputError
+from planner.core.paths import ASSETS, robot_data_file
+from planner.model.robot import build_robot, load_robot
+from planner.model.robot_spec import RESERVED_NAMES, load_robot_spec
+from planner.model.task import load_task, scene_from_dict
 
 ALEX = ASSETS / "robots" / "alex_allegro.toml"
 DEFAULT = ASSETS / "tasks" / "default.toml"

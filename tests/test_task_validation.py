@@ -17,7 +17,6 @@ import trimesh
 from generated_objects import TASK_TEXT_ROBOT
 from sandbox import forbid
 
-from planner.arms import decide, geometric_median
 from planner.check import (
     InvalidTask,
     check_task,
@@ -25,16 +24,17 @@ from planner.check import (
     require_valid,
     validate_task,
 )
-from planner.errors import InputError
-from planner.geometry import pose
-from planner.grasps import PICK_STEP, PLACE_STEP, session_grasp_seed
-from planner.object_mesh import OBSTACLE_LIMITS, load_mesh, load_object_mesh
-from planner.reach import placement_reach
-from planner.runner import run_pipeline
-from planner.session import Session
-from planner.statuette import STATUETTE_PATH
-from planner.steps import StepFailed
-from planner.task import MAX_OBSTACLES, load_task
+from planner.core.errors import InputError
+from planner.core.runner import run_pipeline
+from planner.core.session import Session
+from planner.core.steps import StepFailed
+from planner.grasping.grasp_list import PICK_STEP, PLACE_STEP, session_grasp_seed
+from planner.handover.arms import decide, geometric_median
+from planner.handover.reach import placement_reach
+from planner.model.geometry import pose
+from planner.model.object_mesh import OBSTACLE_LIMITS, load_mesh, load_object_mesh
+from planner.model.statuette import STATUETTE_PATH
+from planner.model.task import MAX_OBSTACLES, load_task
 
 TASK_TEXT = TASK_TEXT_ROBOT
 
@@ -324,7 +324,7 @@ def test_grasps_and_plan_share_a_cached_list(tmp_path, monkeypatch):
     assert run.returncode in (0, 1), run.stderr
     computed = json.loads(listing.read_text())
     session = Session.create(tmp_path / "s", load_task("default"), 5)
-    forbid(monkeypatch, "planner.grasps.compute_grasp_list")  # the very entry `grasps` wrote, not a recomputation
+    forbid(monkeypatch, "planner.grasping.grasp_list.compute_grasp_list")  # the very entry `grasps` wrote, not a recomputation
     try:
         run_pipeline(session, "pick_grasps", {"pick_grasps": {"orientations": 1, "min_clear": 0}})  # no denser search
     except StepFailed:
@@ -346,11 +346,11 @@ def test_reach_is_the_same_in_check_and_the_arms_step(tmp_path, default_scene):
 # --- grasp and place configurations --------------------------------------------------------------
 
 def test_wide_starts_find_place_configurations_the_near_rest_ones_miss(default_scene):
-    from planner.config_score import ConfigScorer
-    from planner.grasp_configs import ConfigSampler, GraspConfigParams, hand_configurations
-    from planner.grasps import GraspParams, grasp_list
-    from planner.hand_placement import ObstacleTest, environment_filter
-    from planner.object_collision import ObjectCollision
+    from planner.collision.hand_placement import ObstacleTest, environment_filter
+    from planner.collision.object_obstacle import ObjectCollision
+    from planner.grasping.grasp_list import GraspParams, grasp_list
+    from planner.handover.config_score import ConfigScorer
+    from planner.handover.grasp_configs import ConfigSampler, GraspConfigParams, hand_configurations
 
     robot = default_scene.robot
     grasps, _ = grasp_list(robot.spec, "left", default_scene.object_mesh, GraspParams(positions=30, orientations=30), 1)
@@ -375,7 +375,7 @@ def test_wide_starts_find_place_configurations_the_near_rest_ones_miss(default_s
 
 
 def test_forced_arms_are_checked_before_the_reach_search(tmp_path, default_scene):
-    from planner.errors import RegraspError
+    from planner.core.errors import RegraspError
 
     session = Session.create(tmp_path / "s", default_scene, 0)
     with pytest.raises(RegraspError, match=r"arms of the robot \(right, left; the same one twice for a direct transfer\); "

@@ -12,12 +12,12 @@ import pytest
 import trimesh
 from sandbox import copy_example, forbid, one_error_line, read_manifest, regrasp, write_manifest
 
-from planner.errors import InputError
-from planner.paths import ASSETS, TASKS_DIR
-from planner.robot_spec import load_robot_spec
-from planner.session import MANIFEST, MESHES, Session
+from planner.core.errors import InputError
+from planner.core.paths import ASSETS, TASKS_DIR
+from planner.core.session import MANIFEST, MESHES, Session
+from planner.model.robot_spec import load_robot_spec
+from planner.model.task import load_task
 from planner.suite.spec import load_suite
-from planner.task import load_task
 
 LONG = "7" * 5000  # more digits than Python converts (4300)
 
@@ -67,7 +67,7 @@ def test_a_session_never_reads_a_mesh_file(session: Path, tmp_path: Path, monkey
     arrays["0_key"] = np.array(str(outside))
     np.savez(session / MESHES, **arrays)
     _edit(session, lambda m: m["task"]["object"].update(mesh=str(outside), scale=0.5))
-    forbid(monkeypatch, "planner.object_mesh._read")
+    forbid(monkeypatch, "planner.model.object_mesh._read")
     err = _open_error(session)
     assert (err.source, err.field) == (str(session / MANIFEST), "task.object.mesh")
     assert "not embedded" in err.detail and "(scale 0.5, up z)" in err.detail

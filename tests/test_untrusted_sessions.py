@@ -21,8 +21,8 @@ from sandbox import (
     write_manifest,
 )
 
-from planner.errors import InputError
-from planner.session import MANIFEST, MESHES, Session
+from planner.core.errors import InputError
+from planner.core.session import MANIFEST, MESHES, Session
 
 SHARED_CACHE = os.environ["REGRASP_CACHE"]  # the suite's cache (conftest), warm: `plan` runs use it
 

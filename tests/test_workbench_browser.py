@@ -13,8 +13,8 @@ from PIL import Image
 from playwright.sync_api import Browser, Page
 from scipy.spatial.transform import Rotation
 
-from planner.paths import DEFAULT_TASK, PROJECT_ROOT
-from planner.session import Session
+from planner.core.paths import DEFAULT_TASK, PROJECT_ROOT
+from planner.core.session import Session
 from workbench.app import Workbench
 from workbench.screenshot import free_port as _free_port
 

@@ -16,8 +16,8 @@ from test_workbench_browser import EXAMPLE, _free_port, _wait_for
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
-from planner.paths import DEFAULT_TASK
-from planner.session import Session
+from planner.core.paths import DEFAULT_TASK
+from planner.core.session import Session
 from workbench import session_panel
 from workbench.app import Workbench
 from workbench.client_guard import origin_allowed

@@ -20,7 +20,7 @@ from test_workbench_browser import (
     _wait_for,
 )
 
-from planner.session import Session
+from planner.core.session import Session
 from workbench.app import Workbench
 from workbench.layers import LAYERS
 from workbench.layers.grasps import GraspsLayer, friction_cones

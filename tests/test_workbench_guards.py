@@ -10,8 +10,8 @@ import pytest
 from sandbox import snapshot
 from test_workbench_browser import _free_port
 
-from planner.errors import RegraspError
-from planner.paths import ASSETS, DEFAULT_TASK
+from planner.core.errors import RegraspError
+from planner.core.paths import ASSETS, DEFAULT_TASK
 from workbench import session_panel
 from workbench.app import Workbench
 from workbench.session_store import MAX_SESSION_NAME, check_name
@@ -41,7 +41,7 @@ def blocked_run(bench: Workbench, monkeypatch: pytest.MonkeyPatch) -> Iterator[t
     """Runs started from the panel wait on the returned event (set it to let them finish) instead of planning."""
     gate = threading.Event()
 
-    def waiting(session, until, params, progress):  # stands in for planner.runner.run_pipeline
+    def waiting(session, until, params, progress):  # stands in for planner.core.runner.run_pipeline
         assert gate.wait(120), "the test never let the run finish"
         return []
     monkeypatch.setattr(session_panel, "run_pipeline", waiting)

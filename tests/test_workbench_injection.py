@@ -14,9 +14,9 @@ import pytest
 from playwright.sync_api import Browser, Page
 from test_workbench_browser import EXAMPLE, VIEWPORT, _free_port, _wait_for
 
-from planner.session import MANIFEST, Session
+from planner.core.session import MANIFEST, Session
+from planner.model.task import load_task
 from planner.suite.spec import load_suite
-from planner.task import load_task
 from workbench.app import Workbench
 from workbench.export import session_html
 from workbench.step_table import step_details, step_table

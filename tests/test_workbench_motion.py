@@ -29,8 +29,8 @@ from test_workbench_browser import (
     _wait_for,
 )
 
+from planner.core.session import Session
 from planner.motion.result import PHASE_SECONDS, PHASES, Motion
-from planner.session import Session
 from workbench.app import Workbench
 from workbench.export import EXPORT_FPS, MAX_FRAMES, frame_samples
 from workbench.layers import LAYERS

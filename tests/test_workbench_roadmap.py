@@ -10,9 +10,9 @@ import pytest
 from playwright.sync_api import Page
 from test_workbench_browser import CHANGED, EXAMPLE, _changed, _free_port, _settled, _until_changed, _view, _wait_for
 
+from planner.core.session import Session
 from planner.roadmap.build import wrist_positions
 from planner.roadmap.result import Roadmap
-from planner.session import Session
 from workbench.app import Workbench
 from workbench.layers.roadmap import JOINT_STEP, RoadmapLayer, edge_colors, wrist_segments
 

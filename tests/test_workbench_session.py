@@ -15,10 +15,10 @@ import pytest
 from playwright.sync_api import Browser, Page
 from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _free_port, _settled, _until_changed, _view, _wait_for
 
-from planner.errors import RegraspError
-from planner.paths import DEFAULT_TASK
+from planner.core.errors import RegraspError
+from planner.core.paths import DEFAULT_TASK
+from planner.core.session import MANIFEST, Session
 from planner.pipeline import PIPELINE
-from planner.session import MANIFEST, Session
 from workbench.app import Workbench
 from workbench.export import export_html
 from workbench.layers import LAYERS

@@ -1,8 +1,8 @@
 """The workbench app: a viser server that shows a task or a session, lets a person pose the robot and shows its collisions.
 
-It holds no planning logic: it loads a task with `planner.task` or a session with `planner.session`,
-builds the collision model with `planner.collision` and draws what comes back through one layer per
-concern (the session's steps through `session_layers`; the Session panel runs steps via `planner.runner`).
+It holds no planning logic: it loads a task with `planner.model.task` or a session with `planner.core.session`,
+builds the collision model with `planner.collision.checker` and draws what comes back through one layer per
+concern (the session's steps through `session_layers`; the Session panel runs steps via `planner.core.runner`).
 """
 from __future__ import annotations
 
@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from planner.collision import CollisionChecker, build_collision_model
-from planner.errors import RegraspError
-from planner.forked import sigterm_unwinds
-from planner.paths import DEFAULT_TASK, PROJECT_ROOT, TASKS_DIR
-from planner.session import MANIFEST, Session
-from planner.task import Scene, load_task
+from planner.collision.checker import CollisionChecker, build_collision_model
+from planner.core.errors import RegraspError
+from planner.core.forked import sigterm_unwinds
+from planner.core.paths import DEFAULT_TASK, PROJECT_ROOT, TASKS_DIR
+from planner.core.session import MANIFEST, Session
+from planner.model.task import Scene, load_task
 
 from .client_guard import ClientGuard
 from .collision_layer import CollisionLayer

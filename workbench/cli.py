@@ -12,16 +12,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from planner import __version__
-from planner.errors import InputError, RegraspError
-from planner.paths import DEFAULT_TASK, PROJECT_ROOT
+from planner.core.errors import InputError, RegraspError
+from planner.core.paths import DEFAULT_TASK, PROJECT_ROOT
 
 from .progress import Bars
 
 if TYPE_CHECKING:
     import trimesh
 
-    from planner.robot_spec import RobotSpec
-    from planner.task import Scene
+    from planner.model.robot_spec import RobotSpec
+    from planner.model.task import Scene
 
 EXAMPLE_SESSION = PROJECT_ROOT / "sessions" / "default-example"
 SCREENSHOT = PROJECT_ROOT / "assets" / "workbench.png"
@@ -36,7 +36,7 @@ def _cmd_workbench(args: argparse.Namespace) -> int:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from planner.check import check_task
-    from planner.task import load_task
+    from planner.model.task import load_task
 
     print(f"loading {args.task} ...", file=sys.stderr)
     report = check_task(load_task(args.task))
@@ -46,7 +46,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     from planner.bench import bench_collision
-    from planner.task import load_task
+    from planner.model.task import load_task
 
     scene = load_task(args.task)
     print(f"benchmarking collision checks on {scene.name} ({args.samples} configurations) ...", file=sys.stderr)
@@ -61,7 +61,7 @@ def _bench_in_scratch(args: argparse.Namespace, bench: Callable[[Scene, Path, Ca
     """Run a benchmark that writes sessions into a scratch folder (deleted after), print its table and maybe its JSON."""
     import tempfile
 
-    from planner.task import load_task
+    from planner.model.task import load_task
 
     scene = load_task(args.task)
     with tempfile.TemporaryDirectory(prefix="regrasp-bench-") as tmp:
@@ -86,8 +86,8 @@ def _cmd_bench_motion(args: argparse.Namespace) -> int:
 
 def step_params(assignments: list[str]) -> dict[str, dict[str, Any]]:
     """The `--set STEP.PARAM=VALUE` assignments by step, each step's set checked whole (names, types) before anything runs."""
+    from planner.core.steps import parse_assignment
     from planner.pipeline import step_named
-    from planner.steps import parse_assignment
 
     params: dict[str, dict[str, Any]] = {}
     for text in assignments:
@@ -100,12 +100,12 @@ def step_params(assignments: list[str]) -> dict[str, dict[str, Any]]:
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from planner.check import require_valid
+    from planner.core.runner import run_pipeline
+    from planner.core.session import Session
+    from planner.core.stages import stage_table
+    from planner.core.steps import StepFailed
+    from planner.model.task import load_task
     from planner.pipeline import step_named, steps_until
-    from planner.runner import run_pipeline
-    from planner.session import Session
-    from planner.stages import stage_table
-    from planner.steps import StepFailed
-    from planner.task import load_task
 
     params = step_params(args.set or [])  # a bad --set or --until fails here: no session folder is made
     steps_until(args.until)
@@ -149,11 +149,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 def _cmd_suite(args: argparse.Namespace) -> int:
     import os
 
+    from planner.model.task import load_task
     from planner.suite.executors import LocalExecutor, RayExecutor
     from planner.suite.job import check_until
     from planner.suite.run import run_suite
     from planner.suite.spec import load_suite
-    from planner.task import load_task
 
     from .suite_report import write_report
 
@@ -187,7 +187,7 @@ def positive_int(text: str) -> int:
 
 def seed_argument(text: str) -> int:
     """argparse type of --seed: a whole number in the range a session file accepts (checked before any folder is made)."""
-    from planner.bounds import seed_problem
+    from planner.core.bounds import seed_problem
 
     try:
         value = int(text)
@@ -211,8 +211,8 @@ def suite_argument(text: str) -> Path:
 
 def params_text() -> str:
     """Every pipeline step's parameters with their types, defaults, ranges and units, as `regrasp params` prints them."""
+    from planner.core.steps import param_bounds
     from planner.pipeline import PIPELINE
-    from planner.steps import param_bounds
 
     lines = []
     for step in PIPELINE:
@@ -257,10 +257,10 @@ def _cmd_screenshot(args: argparse.Namespace) -> int:
 def _cmd_roadmap(args: argparse.Namespace) -> int:
     import time
 
+    from planner.model.task import load_task
     from planner.roadmap import roadmap_for
     from planner.roadmap.result import render_stats
     from planner.roadmap.step import session_roadmap_seed
-    from planner.task import load_task
 
     params = _option_params("--nodes", "roadmap", {"nodes": args.nodes, "tree": args.tree})
     scene = load_task(args.task)
@@ -282,7 +282,7 @@ def _cmd_grasps(args: argparse.Namespace) -> int:
     import math
     import time
 
-    from planner.grasps import GraspParams, grasp_list, session_grasp_seed
+    from planner.grasping.grasp_list import GraspParams, grasp_list, session_grasp_seed
 
     frames = {} if args.frames is None else {"orientations": math.ceil(args.frames / GraspParams().positions)}
     params = _option_params("--frames", "pick_grasps", frames)
@@ -320,9 +320,9 @@ def _option_params(option: str, step: str, values: dict[str, Any]) -> Any:
 def _grasp_inputs(args: argparse.Namespace) -> tuple[RobotSpec, trimesh.Trimesh, str]:
     """The robot spec, the object mesh and a label, from TASK or from --robot and --object."""
     from planner.check import require_valid
-    from planner.object_mesh import load_object_mesh
-    from planner.robot_spec import load_robot_spec
-    from planner.task import BUILTIN_OBJECTS, load_task
+    from planner.model.object_mesh import load_object_mesh
+    from planner.model.robot_spec import load_robot_spec
+    from planner.model.task import BUILTIN_OBJECTS, load_task
 
     if args.robot or args.object:
         if not (args.robot and args.object) or args.task:
@@ -335,14 +335,14 @@ def _grasp_inputs(args: argparse.Namespace) -> tuple[RobotSpec, trimesh.Trimesh,
 
 
 def _write_json(path: Path, data: dict) -> None:
-    from planner.results import atomic_write_text
+    from planner.core.results import atomic_write_text
 
     atomic_write_text(path, json.dumps(data, indent=2))
 
 
 def task_argument(text: str) -> Path:
     """argparse type of TASK: a task file, or a name in assets/tasks/ ("did you mean" and the names otherwise)."""
-    from planner.task import find_task
+    from planner.model.task import find_task
 
     try:
         return find_task(text)
@@ -483,7 +483,7 @@ class _LineAboveBars(logging.Handler):
 
 def main(argv: list[str] | None = None) -> int:
     """Run one sub-command; every fault a user can meet ends in one line on stderr and an exit code, never a traceback."""
-    from planner.forked import Terminated, sigterm_unwinds
+    from planner.core.forked import Terminated, sigterm_unwinds
 
     p = parser()
     args = p.parse_args(argv)

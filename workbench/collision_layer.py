@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import viser
 
-from planner.collision import CollisionModel
+from planner.collision.checker import CollisionModel
 
 from .meshes import coal_to_trimesh, poses_wxyz
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from planner.results import atomic_write_text
-from planner.session import Session
+from planner.core.results import atomic_write_text
+from planner.core.session import Session
 
 from .layers.motion import MotionLayer
 from .robot_layer import RobotLayer

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import viser
 
-from planner.errors import RegraspError
+from planner.core.errors import RegraspError
 
 
 def error_text(exc: Exception) -> str:

@@ -7,7 +7,7 @@ from typing import Any
 
 import viser
 
-from planner.steps import Step, param_bounds
+from planner.core.steps import Step, param_bounds
 
 EDITABLE = (bool, int, float, str)
 
@@ -30,7 +30,7 @@ def whole(value: Any) -> Any:
 
 class ParamInputs:
     """One input per editable field of `step`'s parameters, starting at `values` (else the defaults); a number's limits and
-    hint (range and unit) are those its parameter declares (planner/bounds.py), as `--set` and `regrasp params` use them."""
+    hint (range and unit) are those its parameter declares (planner/core/bounds.py), as `--set` and `regrasp params` use them."""
 
     def __init__(self, gui: viser.GuiApi, step: Step, values: Mapping[str, Any] | None = None):
         self.step = step

@@ -7,7 +7,7 @@ from typing import TextIO
 
 from tqdm import tqdm
 
-from planner.steps import Progress
+from planner.core.steps import Progress
 
 LABEL_WIDTH = 14
 PLAIN_STEP = 10  # percent: in a log, a line each time a step gets this much further

@@ -5,7 +5,7 @@ import numpy as np
 import pinocchio as pin
 import viser
 
-from planner.robot import Robot
+from planner.model.robot import Robot
 
 from .meshes import coal_to_trimesh, poses_wxyz
 from .rooted import Rooted

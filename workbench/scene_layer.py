@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import viser
 
-from planner.task import Scene
+from planner.model.task import Scene
 
 from .meshes import matrix_wxyz
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from PIL import Image
 
-from planner.errors import RegraspError
+from planner.core.errors import RegraspError
 
 from .view import close_up, move_cameras
 

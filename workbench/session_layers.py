@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import viser
 
-from planner.session import Session
+from planner.core.session import Session
 
 from .layers import LAYERS, StepLayer
 from .layers.base import Host, Pose

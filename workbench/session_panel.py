@@ -1,6 +1,6 @@
 """The Session panel: save and load sessions, the step table, runs in the background, re-run from here, export.
 
-It holds no planning logic: runs go through `planner.runner`, and the workbench draws the session
+It holds no planning logic: runs go through `planner.core.runner`, and the workbench draws the session
 that comes back. The workbench never writes into a folder it loaded: runs go into a scratch
 session (a loaded one is first branched into it), Save copies into `sessions/<name>` and re-run
 branches into a new `sessions/<name>-rerun-N`.
@@ -16,13 +16,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import viser
 
-from planner.bounds import SEED, seed_problem
-from planner.errors import RegraspError
-from planner.forked import stop_pools
+from planner.core.bounds import SEED, seed_problem
+from planner.core.errors import RegraspError
+from planner.core.forked import stop_pools
+from planner.core.runner import ProgressFactory, run_pipeline
+from planner.core.session import Session
+from planner.core.steps import Progress, Step
 from planner.pipeline import PIPELINE, step_named, steps_until
-from planner.runner import ProgressFactory, run_pipeline
-from planner.session import Session
-from planner.steps import Progress, Step
 
 from .export import scene_html
 from .layers.base import Pose

@@ -7,10 +7,10 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from planner.errors import RegraspError
-from planner.paths import PROJECT_ROOT, plain_name
-from planner.results import writing
-from planner.session import Session
+from planner.core.errors import RegraspError
+from planner.core.paths import PROJECT_ROOT, plain_name
+from planner.core.results import writing
+from planner.core.session import Session
 
 SESSIONS_DIR = PROJECT_ROOT / "sessions"
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from planner.core.session import Session
 from planner.pipeline import PIPELINE
-from planner.session import Session
 
 from .layers import LAYERS
 from .text import plain

@@ -13,8 +13,8 @@ from urllib.parse import quote
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from planner.environment import Environment
-from planner.results import atomic_write_text
+from planner.core.results import atomic_write_text
+from planner.model.environment import Environment
 from planner.suite.spec import Region, SuiteSpec
 
 from .text import plain

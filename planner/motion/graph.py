@@ -15,10 +15,10 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ..results import frozen
-from ..roadmap.query import shortest_path
-from ..roadmap.result import Roadmap
-from .space import JointSpace
+from planner.core.results import frozen
+from planner.motion.space import JointSpace
+from planner.roadmap.query import shortest_path
+from planner.roadmap.result import Roadmap
 
 UNKNOWN, VALID, INVALID = 0, 1, -1
 

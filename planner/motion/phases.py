@@ -32,20 +32,20 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..arm_ik import ArmIK
-from ..collision import CollisionChecker, CollisionModel
-from ..forked import forked_map
-from ..geometry import coal_convex, coal_mesh, transform3s
-from ..hand_placement import world_aabb
-from ..reach import approach_direction
-from ..roadmap.local_planner import geometry_radii
-from ..task import Scene
-from .graph import MotionGraph
-from .result import PHASES
-from .situation import Situation, finger_geometries, fingertip_geometries, for_motion, situation_base
-from .space import JointSpace
-from .transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut, shortcut_vertices
-from .validity import Clearances, Graded, Profile, Validity, far, fits, make_validity
+from planner.collision.checker import CollisionChecker, CollisionModel
+from planner.collision.hand_placement import world_aabb
+from planner.collision.segments import geometry_radii
+from planner.collision.situation import Situation, finger_geometries, fingertip_geometries, for_motion, situation_base
+from planner.collision.validity import Clearances, Graded, Profile, Validity, far, fits, make_validity
+from planner.core.forked import forked_map
+from planner.handover.arm_ik import ArmIK
+from planner.handover.reach import approach_direction
+from planner.model.geometry import coal_convex, coal_mesh, transform3s
+from planner.model.task import Scene
+from planner.motion.graph import MotionGraph
+from planner.motion.result import PHASES
+from planner.motion.space import JointSpace
+from planner.motion.transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut, shortcut_vertices
 
 
 @dataclass(frozen=True)

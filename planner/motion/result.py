@@ -5,8 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bounds import bounded
-from ..results import array
+from planner.core.bounds import bounded
+from planner.core.results import array
 
 PHASES = ("Grasp", "Carry", "Place", "Rest")
 PLANNERS = ("roadmap", "rrt")

@@ -18,7 +18,7 @@ from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 
-from ..results import frozen
+from planner.core.results import frozen
 
 StateValid = Callable[[np.ndarray], bool]
 MotionValid = Callable[[np.ndarray, np.ndarray], bool]

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..results import frozen
+from planner.core.results import frozen
 
 
 @dataclass(frozen=True, eq=False)

@@ -14,17 +14,17 @@ from collections.abc import Iterator
 import numpy as np
 import pinocchio as pin
 
-from ..collision import build_collision_model
-from ..double_grasps import DoubleGrasps
-from ..grasps import GraspList
-from ..roadmap.result import Roadmap
-from ..steps import Progress, Step, StepContext, StepOutput, no_progress
-from ..task import Scene
-from .graph import MotionGraph
-from .phases import HandGrasp, PhasePlanner, Piece, PieceFailed
-from .result import PHASES, Motion, MotionParams
-from .timing import sample_polyline
-from .validity import Profile, transit_profile
+from planner.collision.checker import build_collision_model
+from planner.collision.validity import Profile, transit_profile
+from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progress
+from planner.grasping.grasp_list import GraspList
+from planner.handover.double_grasps import DoubleGrasps
+from planner.model.task import Scene
+from planner.motion.graph import MotionGraph
+from planner.motion.phases import HandGrasp, PhasePlanner, Piece, PieceFailed
+from planner.motion.result import PHASES, Motion, MotionParams
+from planner.motion.timing import sample_polyline
+from planner.roadmap.result import Roadmap
 
 
 def contact_profile(p: MotionParams) -> Profile:

@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .graph import INVALID, VALID, MotionGraph, PhaseStatus
-from .rrt import rrt_connect
-from .space import JointSpace
-from .validity import MotionValidity
+from planner.collision.validity import MotionValidity
+from planner.motion.graph import INVALID, VALID, MotionGraph, PhaseStatus
+from planner.motion.rrt import rrt_connect
+from planner.motion.space import JointSpace
 
 
 @dataclass(frozen=True)

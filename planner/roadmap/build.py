@@ -12,16 +12,16 @@ from concurrent.futures import Executor
 import numpy as np
 import pinocchio as pin
 
-from ..collision import CollisionModel, CollisionParams, build_collision_model
-from ..forked import available_cpus, executor
-from ..robot import Robot
-from ..steps import Progress, no_progress
-from ..task import Scene
-from . import super_graph as sg
-from .decomposition import Decomposition, decompose, pair_subsets
-from .local_planner import SegmentChecker
-from .result import Roadmap, RoadmapParams
-from .vis_prm import Elementary, vis_prm
+from planner.collision.checker import CollisionModel, CollisionParams, build_collision_model
+from planner.collision.segments import SegmentChecker
+from planner.core.forked import available_cpus, executor
+from planner.core.steps import Progress, no_progress
+from planner.model.robot import Robot
+from planner.model.task import Scene
+from planner.roadmap import super_graph as sg
+from planner.roadmap.decomposition import Decomposition, decompose, pair_subsets
+from planner.roadmap.result import Roadmap, RoadmapParams
+from planner.roadmap.vis_prm import Elementary, vis_prm
 
 _WORKER: dict = {}
 

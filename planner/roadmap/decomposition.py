@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..collision import CollisionModel
-from ..robot import Robot
+from planner.collision.checker import CollisionModel
+from planner.model.robot import Robot
 
 
 @dataclass(frozen=True, eq=False)

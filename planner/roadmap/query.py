@@ -12,9 +12,9 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ..task import Scene
-from .build import roadmap_collision_model, segment_checker
-from .result import Roadmap, RoadmapParams
+from planner.model.task import Scene
+from planner.roadmap.build import roadmap_collision_model, segment_checker
+from planner.roadmap.result import Roadmap, RoadmapParams
 
 
 class Graph:

@@ -5,14 +5,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..collision import CODE_VERSION as PAIRS_VERSION
-from ..results import load_result, read_only, save_result
-from ..steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
-from ..task import Scene
-from ..user_cache import cache_key as hash_key
-from ..user_cache import cache_path, computing, read_cached
-from .build import build_roadmap
-from .result import Roadmap, RoadmapParams
+from planner.collision.checker import CODE_VERSION as PAIRS_VERSION
+from planner.core.results import load_result, read_only, save_result
+from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
+from planner.core.user_cache import cache_key as hash_key
+from planner.core.user_cache import cache_path, computing, read_cached
+from planner.model.task import Scene
+from planner.roadmap.build import build_roadmap
+from planner.roadmap.result import Roadmap, RoadmapParams
 
 CODE_VERSION = "roadmap-2"  # 2: no timings in the roadmap
 

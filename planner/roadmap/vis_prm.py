@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..steps import Progress, no_progress
-from .local_planner import SegmentChecker
+from planner.collision.segments import SegmentChecker
+from planner.core.steps import Progress, no_progress
 
 
 @dataclass(frozen=True)

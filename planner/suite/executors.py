@@ -6,9 +6,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from types import ModuleType
 
-from ..errors import RegraspError
-from ..forked import worker_pool
-from .job import JobResult, TaskJob, run_job
+from planner.core.errors import RegraspError
+from planner.core.forked import worker_pool
+from planner.suite.job import JobResult, TaskJob, run_job
 
 OnResult = Callable[[JobResult], None]
 

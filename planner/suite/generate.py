@@ -15,19 +15,19 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from ..check import check_task, object_collisions
-from ..collision import CollisionModel, build_collision_model
-from ..errors import InputError
-from ..forked import forked_map
-from ..geometry import pose
-from ..object_mesh import MeshOptions, load_object_mesh
-from ..paths import ASSETS, plain_name
-from ..results import atomic_write_bytes, atomic_write_text, writing
-from ..session import cached_spec_file
-from ..task import BUILTIN_OBJECTS, Scene, load_task, scene_from_dict
-from ..tomlread import load_toml
-from .spec import Region, SuiteObject, SuiteSpec
-from .toml_text import toml_text
+from planner.check import check_task, object_collisions
+from planner.collision.checker import CollisionModel, build_collision_model
+from planner.core.errors import InputError
+from planner.core.forked import forked_map
+from planner.core.paths import ASSETS, plain_name
+from planner.core.results import atomic_write_bytes, atomic_write_text, writing
+from planner.core.session import cached_spec_file
+from planner.core.tomlread import load_toml
+from planner.model.geometry import pose
+from planner.model.object_mesh import MeshOptions, load_object_mesh
+from planner.model.task import BUILTIN_OBJECTS, Scene, load_task, scene_from_dict
+from planner.suite.spec import Region, SuiteObject, SuiteSpec
+from planner.suite.toml_text import toml_text
 
 PLACEMENTS = ("initial", "final")
 

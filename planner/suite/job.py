@@ -14,16 +14,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import RegraspError
-from ..forked import cpu_budget
-from ..paths import file_in
-from ..pipeline import PIPELINE, step_named, steps_until
-from ..results import atomic_write_bytes, writing
-from ..runner import run_pipeline
-from ..session import MANIFEST, Session, cached_spec_file
-from ..steps import StepFailed
-from ..task import scene_from_dict
-from ..tomlread import load_toml
+from planner.core.errors import RegraspError
+from planner.core.forked import cpu_budget
+from planner.core.paths import file_in
+from planner.core.results import atomic_write_bytes, writing
+from planner.core.runner import run_pipeline
+from planner.core.session import MANIFEST, Session, cached_spec_file
+from planner.core.steps import StepFailed
+from planner.core.tomlread import load_toml
+from planner.model.task import scene_from_dict
+from planner.pipeline import PIPELINE, step_named, steps_until
 
 CHECK = "check"  # the failing "step" of a task rejected before any step runs
 ERROR = "error"  # the failing "step" of a task on which the planner raised an unexpected exception

@@ -18,13 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from ..errors import InputError, RegraspError
-from ..results import atomic_write_text, not_a_link, read_json_object, writing
-from ..session import checked_seconds, typed
-from .generate import GeneratedTask, generate_tasks, load_generated
-from .job import JobResult, TaskJob, TaskOutcome, write_session
-from .spec import SuiteSpec
-from .summary import TaskRecord, csv_text, json_text, summary
+from planner.core.errors import InputError, RegraspError
+from planner.core.results import atomic_write_text, not_a_link, read_json_object, writing
+from planner.core.session import checked_seconds, typed
+from planner.suite.generate import GeneratedTask, generate_tasks, load_generated
+from planner.suite.job import JobResult, TaskJob, TaskOutcome, write_session
+from planner.suite.spec import SuiteSpec
+from planner.suite.summary import TaskRecord, csv_text, json_text, summary
 
 MANIFEST = "suite-run.json"
 FOLDERS = ("tasks", "sessions", "results")

@@ -15,7 +15,7 @@ positions = 20
 
 [[objects]]           # the statuette, a mesh file (beside the suite or in assets/objects/, with scale and up), or a shape
 name = "box_long"
-shape = "box"         # one of planner/shapes.py's SHAPES, with its parameters
+shape = "box"         # one of planner/model/shapes.py's SHAPES, with its parameters
 size = [0.22, 0.06, 0.07]
 
 [[initial_regions]]   # where objects start (and [[final_regions]]: where they go): a box on the support, a yaw range
@@ -35,14 +35,14 @@ from typing import Any
 
 import numpy as np
 
-from ..bounds import SEED
-from ..errors import InputError, RegraspError
-from ..object_mesh import UP_AXES, MeshOptions
-from ..paths import ASSETS, named_file
-from ..pipeline import step_named
-from ..shapes import SHAPES, generate, obj_text
-from ..task import BUILTIN_OBJECTS, MAX_COORDINATE, find_task
-from ..tomlread import Table, load_toml
+from planner.core.bounds import SEED
+from planner.core.errors import InputError, RegraspError
+from planner.core.paths import ASSETS, named_file
+from planner.core.tomlread import Table, load_toml
+from planner.model.object_mesh import UP_AXES, MeshOptions
+from planner.model.shapes import SHAPES, generate, obj_text
+from planner.model.task import BUILTIN_OBJECTS, MAX_COORDINATE, find_task
+from planner.pipeline import step_named
 
 SUITES_DIR = ASSETS / "suites"
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,39}")  # object and region names become file names and report labels

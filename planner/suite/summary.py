@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ..pipeline import PIPELINE
-from .generate import GeneratedTask
-from .job import TaskOutcome
+from planner.pipeline import PIPELINE
+from planner.suite.generate import GeneratedTask
+from planner.suite.job import TaskOutcome
 
 
 @dataclass(frozen=True)

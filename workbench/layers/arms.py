@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.arms import ArmAssignment
+from planner.handover.arms import ArmAssignment
 
 from .base import Pose, StepLayer
 

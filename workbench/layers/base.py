@@ -8,10 +8,10 @@ from typing import Any, Protocol
 import numpy as np
 import viser
 
-from planner.errors import RegraspError
+from planner.core.errors import RegraspError
+from planner.core.session import Session
+from planner.model.task import Scene
 from planner.pipeline import step_named
-from planner.session import Session
-from planner.task import Scene
 
 from ..robot_layer import RobotLayer
 from ..rooted import Rooted

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import viser
 
-from planner.double_grasps import DoubleGrasps
-from planner.grasps import GraspList, hand_spec_of
-from planner.hand_model import load_hand_model
-from planner.session import Session
-from planner.task import Scene
+from planner.core.session import Session
+from planner.grasping.grasp_list import GraspList, hand_spec_of
+from planner.handover.double_grasps import DoubleGrasps
+from planner.model.hand_model import load_hand_model
+from planner.model.task import Scene
 
 from ..meshes import matrix_wxyz
 from ..scene_layer import OBJECT_COLOR

@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import viser
 
-from planner.exchange import Exchange
-from planner.session import Session
-from planner.task import Scene
+from planner.core.session import Session
+from planner.handover.exchange import Exchange
+from planner.model.task import Scene
 
 from .arms import ARM_COLORS
 from .base import Host, StepLayer

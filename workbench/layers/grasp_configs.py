@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.grasp_configs import GraspConfigs
-from planner.grasps import GraspList
-from planner.reach import fingertip_centre
+from planner.grasping.grasp_list import GraspList
+from planner.handover.grasp_configs import GraspConfigs
+from planner.handover.reach import fingertip_centre
 
 from ..text import plain
 from .base import Pose, StepLayer

@@ -7,12 +7,12 @@ import numpy as np
 import trimesh
 import viser
 
-from planner.finger_workspace import hand_workspaces
-from planner.grasps import GraspList, hand_spec_of
-from planner.hand_model import HandModel, load_hand_model
-from planner.object_model import object_model
-from planner.session import Session
-from planner.task import Scene
+from planner.core.session import Session
+from planner.grasping.finger_workspace import hand_workspaces
+from planner.grasping.grasp_list import GraspList, hand_spec_of
+from planner.grasping.object_model import object_model
+from planner.model.hand_model import HandModel, load_hand_model
+from planner.model.task import Scene
 
 from ..meshes import matrix_wxyz
 from ..text import plain

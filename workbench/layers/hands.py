@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import viser
 
-from planner.hand_model import HandModel
+from planner.model.hand_model import HandModel
 
 from ..meshes import coal_to_trimesh, matrix_wxyz
 

@@ -15,9 +15,9 @@ import time
 import numpy as np
 import viser
 
+from planner.core.session import Session
+from planner.model.task import Scene
 from planner.motion.result import PHASE_SECONDS, PHASES, Motion
-from planner.session import Session
-from planner.task import Scene
 
 from ..meshes import matrix_wxyz
 from ..notify import error_text

@@ -16,11 +16,11 @@ import time
 import numpy as np
 import viser
 
+from planner.core.session import Session
+from planner.model.task import Scene
 from planner.roadmap.build import wrist_positions
 from planner.roadmap.query import QueryResult, RoadmapPlanner
 from planner.roadmap.result import Roadmap
-from planner.session import Session
-from planner.task import Scene
 
 from ..notify import error_text
 from ..text import plain

@@ -1,0 +1,455 @@
+"""Fast collision checking of the robot against itself and the environment (pinocchio + coal).
+
+Geometry: each link mesh is replaced by its convex hull, which contains it (primitives are kept).
+Pairs: adjacent links, links on one joint, pairs colliding at the rest configuration (as MoveIt's
+setup assistant does) and link pairs the robot spec allows to touch (`allowed_collisions`, as an
+SRDF's disable_collisions) are disabled; pairs never within `prune_margin` over `prune_samples`
+uniform samples are pruned. The pair set is computed once per robot spec and cached. Pairs between
+the two arms (hands included) are never pruned: the arms share a workspace, and uniform samples
+rarely bring the hands together. Robot-obstacle pairs collide within `env_padding` (a security
+margin, which the broad phase inflates its boxes by). A check runs pinocchio's naive broad phase (every
+pair of boxes, then the subset's pairs whose boxes meet): with some seventy geometries it beat sweep-and-prune and
+a dynamic AABB tree over the motion step's checks (docs/benchmarks.md).
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+import trimesh
+
+from planner.core.results import atomic_write_text
+from planner.core.user_cache import cache_path, read_cached
+from planner.model.environment import Environment
+from planner.model.geometry import coal_convex, se3
+from planner.model.robot import Robot
+
+CODE_VERSION = "pairs-3"
+
+
+@dataclass(frozen=True)
+class CollisionParams:
+    """How the simplified model is made; part of the pair cache key."""
+
+    prune_margin: float = 0.05  # m: a pair never closer than this in the samples is pruned
+    prune_samples: int = 4000
+    env_padding: float = 0.01  # m: robot-obstacle pairs count as colliding closer than this
+    self_padding: float = 0.0  # m: robot-robot pairs count as colliding closer than this
+    seed: int = 0
+    object_padding: float = 0.0  # m: robot-object pairs (subset 'object', when the model has the object) likewise
+
+
+@dataclass(frozen=True)
+class PairSet:
+    """Which robot self-collision pairs are checked, and why the others are not."""
+
+    kept: tuple[tuple[str, str], ...]
+    adjacent: int
+    at_rest: int
+    pruned: int
+    allowed: int  # pairs of links the robot spec allows to touch (allowed_collisions)
+
+    def to_json(self) -> str:
+        return json.dumps({"kept": self.kept, "adjacent": self.adjacent, "at_rest": self.at_rest, "pruned": self.pruned,
+                           "allowed": self.allowed})
+
+    @staticmethod
+    def from_json(text: str) -> "PairSet":
+        d = json.loads(text)
+        kept = tuple(tuple(p) for p in d["kept"])
+        counts = (d["adjacent"], d["at_rest"], d["pruned"], d["allowed"])
+        if not all(len(p) == 2 and all(isinstance(n, str) for n in p) for p in kept) or not all(type(c) is int for c in counts):
+            raise ValueError("expected 'kept' as pairs of geometry names and integer counts")
+        return PairSet(kept, *counts)
+
+
+def simplified_robot_geometry(robot: Robot) -> pin.GeometryModel:
+    """The robot's collision model with every mesh replaced by its convex hull (a copy)."""
+    return _simplified(robot).copy()
+
+
+@functools.lru_cache(maxsize=8)
+def _simplified(robot: Robot) -> pin.GeometryModel:
+    gm = robot.collision_model.copy()
+    for obj in gm.geometryObjects:
+        if isinstance(obj.geometry, coal.BVHModelBase):
+            vertices = np.asarray(obj.geometry.vertices()) * np.asarray(obj.meshScale)
+            obj.geometry = coal_convex(trimesh.convex.convex_hull(vertices))
+            obj.meshPath = ""
+    return gm
+
+
+def geometry_part(robot: Robot, gm: pin.GeometryModel, index: int) -> str:
+    """The part a geometry belongs to: an arm name, '<arm>_hand', or 'torso' (fixed base included)."""
+    obj = gm.geometryObjects[index]
+    for arm in robot.spec.arms:
+        if obj.name.startswith(arm.hand.prefix):
+            return f"{arm.name}_hand"
+    q = robot.model.joints[obj.parentJoint].idx_q if obj.parentJoint > 0 else -1
+    for name, idx in robot.arm_idx.items():
+        if q in idx:
+            return name
+    return "torso"
+
+
+def geometry_link(name: str) -> str:
+    """The URDF link of a geometry pinocchio named '<link>_<k>'."""
+    link, _, k = name.rpartition("_")
+    return link if k.isdigit() else name
+
+
+def _candidate_pairs(robot: Robot, gm: pin.GeometryModel) -> tuple[list[tuple[int, int]], int, int]:
+    """(pairs, adjacent, allowed): all pairs of robot geometries on different, non-adjacent joints (and not both on the
+    base) whose links the spec does not allow to touch; how many pairs each rule disabled."""
+    parents = robot.model.parents
+    allowed_links = {frozenset(p) for p in robot.spec.allowed_collisions}
+    links = [geometry_link(o.name) for o in gm.geometryObjects]
+    out, adjacent, allowed = [], 0, 0
+    n = len(gm.geometryObjects)
+    for i in range(n):
+        for j in range(i + 1, n):
+            a, b = gm.geometryObjects[i].parentJoint, gm.geometryObjects[j].parentJoint
+            if a == b or parents[a] == b or parents[b] == a:
+                adjacent += 1
+            elif frozenset((links[i], links[j])) in allowed_links:
+                allowed += 1
+            else:
+                out.append((i, j))
+    return out, adjacent, allowed
+
+
+def _pair_cache_key(robot: Robot, params: CollisionParams) -> str:
+    h = hashlib.sha256(CODE_VERSION.encode())
+    h.update(robot.spec.text().encode())
+    for path in [robot.spec.body_urdf] + [a.hand.urdf for a in robot.spec.arms]:
+        h.update(path.read_bytes())
+    h.update(repr((params.prune_margin, params.prune_samples, params.seed)).encode())
+    return h.hexdigest()[:20]
+
+
+def compute_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParams) -> PairSet:
+    """Sample the robot to find the self-collision pairs worth checking (see module docstring)."""
+    pairs, adjacent, allowed = _candidate_pairs(robot, gm)
+    work = gm.copy()
+    work.removeAllCollisionPairs()
+    for i, j in pairs:
+        work.addCollisionPair(pin.CollisionPair(i, j))
+    data, gd = robot.model.createData(), pin.GeometryData(work)
+    pin.computeCollisions(robot.model, data, work, gd, robot.q_rest, False)
+    at_rest = np.array([r.isCollision() for r in gd.collisionResults])
+    for k in range(len(pairs)):
+        gd.collisionRequests[k].security_margin = params.prune_margin
+        if at_rest[k]:
+            gd.deactivateCollisionPair(k)
+    arm_of = [geometry_part(robot, gm, i).removesuffix("_hand") for i in range(len(gm.geometryObjects))]
+    near = np.array([arm_of[i] != arm_of[j] and "torso" not in (arm_of[i], arm_of[j]) for i, j in pairs]) & ~at_rest
+    for k in np.flatnonzero(near):
+        gd.deactivateCollisionPair(int(k))
+    undecided = np.flatnonzero(~at_rest & ~near)
+    rng = np.random.default_rng(params.seed)
+    results = gd.collisionResults
+    for _ in range(params.prune_samples):
+        q = rng.uniform(robot.lower, robot.upper)
+        pin.computeCollisions(robot.model, data, work, gd, q, False)
+        hit = [k for k in undecided if results[int(k)].isCollision()]
+        if hit:
+            near[hit] = True
+            for k in hit:
+                gd.deactivateCollisionPair(int(k))
+            undecided = np.setdiff1d(undecided, hit)
+    names = [o.name for o in gm.geometryObjects]
+    kept = tuple((names[i], names[j]) for (i, j), k in zip(pairs, near) if k)
+    return PairSet(kept, adjacent, int(at_rest.sum()), int((~near & ~at_rest).sum()), allowed)
+
+
+def robot_pair_set(robot: Robot, gm: pin.GeometryModel, params: CollisionParams, use_cache: bool = True) -> PairSet:
+    """The pair set, from the user cache when the spec, URDFs and parameters are unchanged."""
+    path = cache_path("collision_pairs", f"{_pair_cache_key(robot, params)}.json")
+    if use_cache:
+        cached = read_cached([path], lambda: _read_pair_set(path, _file_version(path)), "self-collision pair set")
+        if cached is not None:
+            return cached
+    pairs = compute_pair_set(robot, gm, params)
+    atomic_write_text(path, pairs.to_json())
+    return pairs
+
+
+@functools.lru_cache(maxsize=8)
+def _read_pair_set(path: Path, version: tuple[int, int, int]) -> PairSet:
+    """A cached pair set file parsed once per process while it is unchanged (a model is built for every plan; the file is
+    large)."""
+    return PairSet.from_json(path.read_text())
+
+
+def _file_version(path: Path) -> tuple[int, int, int]:
+    """(inode, size, mtime): a cache entry rewritten (atomically: a new inode) or edited in place reads as another version."""
+    st = path.stat()
+    return st.st_ino, st.st_size, st.st_mtime_ns
+
+
+@dataclass(frozen=True, eq=False)
+class CollisionModel:
+    """Robot hulls + obstacles in one pinocchio GeometryModel, with the pairs of each subset.
+
+    Subsets: 'all', 'self', 'env', '<arm>' (the arm and its hand against everything),
+    '<arm>_env', '<arm>_hand' (the hand against everything), 'hands' (one hand against the other).
+    Shared read-only; each thread or process makes its own `checker()`.
+    """
+
+    robot: Robot
+    geometry: pin.GeometryModel
+    pair_set: PairSet
+    params: CollisionParams
+    n_robot_geoms: int
+    parts: tuple[str, ...]
+    subsets: dict[str, np.ndarray]
+    ends: np.ndarray  # (n_pairs, 2) the geometry indices of each collision pair (read once: the pair list is slow to walk)
+    support: np.ndarray  # (n_geometries, nq) bool: the joints that move each geometry
+    pair_padding: tuple[tuple[int, float], ...] = ()  # (pair, padding): pairs padded otherwise than their kind
+    twins: np.ndarray | None = None  # (n_pairs,) the pair a screening pair stands for (a hull for its mesh), else -1
+
+    def checker(self) -> "CollisionChecker":
+        return CollisionChecker(self)
+
+    def paddings(self) -> np.ndarray:
+        """(n_pairs,) each pair's padding: its kind's ('env', 'object', else 'self') unless `pair_padding` names it."""
+        out = np.full(len(self.ends), self.params.self_padding)
+        out[self.subsets["env"]] = self.params.env_padding
+        out[self.subsets.get("object", [])] = self.params.object_padding
+        for pair, padding in self.pair_padding:
+            out[pair] = padding
+        return self.twinned(out)
+
+    def twinned(self, per_pair: np.ndarray) -> np.ndarray:
+        """A per-pair value with each screening pair given its twin's (in place)."""
+        if self.twins is not None:
+            screening = self.twins >= 0
+            per_pair[screening] = per_pair[self.twins[screening]]
+        return per_pair
+
+    def relative_joints(self) -> np.ndarray:
+        """(n_pairs, nq) bool: the joints whose motion changes each pair's relative pose (a joint above both geometries
+        moves them rigidly together, so it is not one of them)."""
+        return self.support[self.ends[:, 0]] ^ self.support[self.ends[:, 1]]
+
+    def with_subsets(self, extra: dict[str, np.ndarray]) -> "CollisionModel":
+        """The same model with more named pair subsets (pair indices), for a caller's own checks."""
+        return dataclasses.replace(self, subsets={**self.subsets, **extra})
+
+
+def build_collision_model(robot: Robot, environment: Environment = (), params: CollisionParams = CollisionParams(),
+                          use_cache: bool = True) -> CollisionModel:
+    """Simplify the robot, choose its pairs (cached), add the obstacles and index the subsets."""
+    gm = simplified_robot_geometry(robot)
+    pair_set = robot_pair_set(robot, gm, params, use_cache)
+    n_robot = len(gm.geometryObjects)
+    parts = tuple(geometry_part(robot, gm, i) for i in range(n_robot))
+    for ob in environment:
+        gm.addGeometryObject(pin.GeometryObject(f"env/{ob.name}", 0, 0, se3(ob.pose), ob.coal_shape()))
+    index = {o.name: i for i, o in enumerate(gm.geometryObjects)}
+    robot_pairs = [(index[a], index[b]) for a, b in pair_set.kept]
+    # the fixed base against fixed obstacles is checked once, by `check` of the task
+    env_pairs = [(i, e) for i in range(n_robot) if gm.geometryObjects[i].parentJoint != 0
+                 for e in range(n_robot, len(gm.geometryObjects))]
+    gm.removeAllCollisionPairs()
+    for a, b in robot_pairs + env_pairs:
+        gm.addCollisionPair(pin.CollisionPair(a, b))
+    n_self = len(robot_pairs)
+    ends = np.array(robot_pairs + env_pairs, dtype=np.int64).reshape(-1, 2)  # as added (reading them back from the model is slow)
+    first, second = ends[:, 0], ends[:, 1]
+    part = np.array(parts + ("env",) * (len(gm.geometryObjects) - n_robot))
+    pa, pb = part[first], part[second]
+    k = np.arange(len(first))
+    subsets = {"all": k, "self": k[:n_self], "env": k[n_self:]}
+    for arm in robot.spec.arm_names:
+        mine = (pa == arm) | (pb == arm) | (pa == f"{arm}_hand") | (pb == f"{arm}_hand")
+        subsets[arm] = k[mine]
+        subsets[f"{arm}_env"] = k[mine & (k >= n_self)]
+        subsets[f"{arm}_hand"] = k[(pa == f"{arm}_hand") | (pb == f"{arm}_hand")]
+    hands = [f"{a}_hand" for a in robot.spec.arm_names]
+    subsets["hands"] = k[((pa == hands[0]) & (pb == hands[1])) | ((pa == hands[1]) & (pb == hands[0]))]
+    support = joint_support(robot.model, [o.parentJoint for o in gm.geometryObjects])
+    for a in (ends, support):
+        a.setflags(write=False)  # the model is shared read-only
+    return CollisionModel(robot, gm, pair_set, params, n_robot, parts, subsets, ends, support)
+
+
+def joint_support(model: pin.Model, parents: list[int]) -> np.ndarray:
+    """(len(parents), nq) bool: the joints whose motion moves a geometry on each parent joint (those supporting it)."""
+    support = np.zeros((len(parents), model.nq), dtype=bool)
+    for g, parent in enumerate(parents):
+        for j in list(model.supports[parent])[1:]:
+            support[g, model.joints[j].idx_q] = True
+    return support
+
+
+def pair_table(cm: CollisionModel, per_pair: np.ndarray) -> np.ndarray:
+    """(n_geometries, n_geometries) symmetric table of a per-pair value, as pinocchio sets pair flags and margins in one
+    call (a Python loop over thousands of pairs cost more than checking a short motion)."""
+    n = len(cm.geometry.geometryObjects)
+    out = np.zeros((n, n), dtype=per_pair.dtype)
+    out[cm.ends[:, 0], cm.ends[:, 1]] = per_pair
+    out[cm.ends[:, 1], cm.ends[:, 0]] = per_pair
+    return out
+
+
+def active_table(cm: CollisionModel, subset: str | np.ndarray) -> np.ndarray:
+    """The pair table of a subset (a name, or pair indices) as pinocchio activates pairs."""
+    active = np.zeros(len(cm.ends), dtype=bool)
+    active[cm.subsets[subset] if isinstance(subset, str) else subset] = True
+    return pair_table(cm, active)
+
+
+@dataclass(frozen=True)
+class Screen:
+    """A subset checked first with screening pairs in place of their twins (see CollisionChecker.in_collision)."""
+
+    screened: np.ndarray  # the pair table with the screening pairs active instead of their twins
+    exact: np.ndarray  # the subset's own pair table
+    screening: np.ndarray  # (n_pairs,) bool: the screening pairs
+
+
+def screen_of(cm: CollisionModel, subset: str | np.ndarray) -> Screen | None:
+    """The screen of a subset (a name, or pair indices), when it has pairs with a screening twin."""
+    if cm.twins is None:
+        return None
+    pairs = cm.subsets[subset] if isinstance(subset, str) else subset
+    stand_in = np.full(len(cm.ends), -1)
+    screening = cm.twins >= 0
+    stand_in[cm.twins[screening]] = np.flatnonzero(screening)
+    if not np.any(stand_in[pairs] >= 0):
+        return None
+    screened = np.where(stand_in[pairs] >= 0, stand_in[pairs], pairs)
+    return Screen(active_table(cm, screened), active_table(cm, pairs), screening)
+
+
+class CollisionChecker:
+    """Per-thread scratch data for one CollisionModel: one pinocchio collision data and broad-phase manager for all its
+    subsets and paddings, switched to the ones a check asks for (far cheaper than one more collision data, which a forked worker
+    also has to copy). A subset is a name of the model's, or the
+    pair indices of one (of a model sharing this one's geometry and pairs: see CollisionModel.with_subsets)."""
+
+    def __init__(self, cm: CollisionModel, data: pin.Data | None = None):
+        """`data`: pinocchio scratch data to share with other checkers of this thread (each check recomputes it)."""
+        self.cm = cm
+        self.model = cm.robot.model
+        self.data = self.model.createData() if data is None else data
+        self._gd: pin.GeometryData | None = None
+        self._manager = None
+        self._first = None  # the callback that reports the first pair hit (for screens)
+        self._collect = None  # the callback that lists the pairs the broad phase finds (see overlapping)
+        self._tables: dict[str | int, tuple[np.ndarray, Screen | None, np.ndarray]] = {}  # per subset (name, or id of its
+        # indices): its indices (kept, so the id stays theirs), its screen, the pair table it checks
+        self._active: np.ndarray | None = None  # the pair table active now
+        self._margins: np.ndarray | None = None  # the margins table set now (None: the model's)
+        self._own_margins: np.ndarray | None = None
+        self._last: tuple | None = None  # (subset, margins, screen) of the last check, while its setting is active
+        self.checks = 0
+
+    def _entry(self, subset: str | np.ndarray) -> tuple[np.ndarray, Screen | None, np.ndarray]:
+        """(pair indices, screen, pair table) of a subset, made once."""
+        key = subset if isinstance(subset, str) else id(subset)
+        if key not in self._tables:
+            if isinstance(subset, str) and subset not in self.cm.subsets:
+                raise KeyError(f"unknown collision subset '{subset}' (subsets: {', '.join(self.cm.subsets)})")
+            pairs = self.cm.subsets[subset] if isinstance(subset, str) else subset
+            screen = screen_of(self.cm, pairs)
+            self._tables[key] = (pairs, screen, screen.screened if screen is not None else active_table(self.cm, pairs))
+        return self._tables[key]
+
+    def _subset(self, subset: str | np.ndarray, margins: np.ndarray | None = None,
+                exact: bool = False) -> tuple[pin.GeometryData, object]:
+        """The collision data and manager with the subset's pairs active (screened, unless `exact`) and padded by
+        `margins` (a `pair_table`; None: the model's paddings)."""
+        _, screen, table = self._entry(subset)
+        if exact and screen is not None:
+            table = screen.exact
+        gm = self.cm.geometry
+        if margins is None:
+            if self._own_margins is None:
+                self._own_margins = pair_table(self.cm, self.cm.paddings())
+            margins = self._own_margins
+        if self._gd is None:
+            self._gd = pin.GeometryData(gm)
+            self._gd.setActiveCollisionPairs(gm, table, True)
+            self._gd.setSecurityMargins(gm, margins, True, False)
+            self._manager = pin.BroadPhaseManager_NaiveCollisionManager(self.model, gm, self._gd)
+            self._first = pin.CollisionCallBackDefault(gm, self._gd, True)
+            self._active, self._margins = table, margins
+        if self._active is not table:
+            self._gd.setActiveCollisionPairs(gm, table, True)
+            self._active = table
+        if self._margins is not margins:
+            self._gd.setSecurityMargins(gm, margins, True, False)
+            self._margins = margins
+        return self._gd, self._manager
+
+    def in_collision(self, q: np.ndarray, subset: str | np.ndarray = "all", placed: Mapping[int, np.ndarray] | None = None,
+                     margins: np.ndarray | None = None) -> bool:
+        """True if any pair of the subset collides at q; `placed` (geometry index -> world pose) moves fixed geometries
+        for this call, in this checker's own data: the shared model is never written; `margins` (a `pair_table` of
+        paddings) pads the pairs otherwise than the model says, for this call. A subset with screening pairs (see
+        `CollisionModel.twins`) is checked with them in place of their twins, and as itself only when one of them is the
+        first pair hit: a screening geometry holds its twin's, so the answer is the subset's own."""
+        self.checks += 1
+        if self._last is not None and self._last[0] is subset and self._last[1] is margins:  # as the check before
+            screen = self._last[2]
+            gd, manager = self._gd, self._manager
+        else:
+            gd, manager = self._subset(subset, margins)
+            screen = self._entry(subset)[1]
+            self._last = (subset, margins, screen)
+        if placed:
+            pin.updateGeometryPlacements(self.model, self.data, self.cm.geometry, gd, q)
+            for index, T in placed.items():
+                gd.oMg[index] = se3(T)
+            manager.update(False)
+        if screen is None:
+            return bool(pin.computeCollisions(manager, True) if placed else
+                        pin.computeCollisions(self.model, self.data, manager, q, True))
+        first = self._first
+        hit = bool(pin.computeCollisions(manager, first) if placed else
+                   pin.computeCollisions(self.model, self.data, manager, first, q))
+        if not hit or not screen.screening[first.collisionPairIndex]:
+            return hit
+        # a screening pair (the object's hull, which holds its mesh) is hit first: the subset's own pairs decide
+        self._last = None
+        self._subset(subset, margins, exact=True)
+        manager.update(False)  # the boxes are inflated by the margins of the active pairs
+        return bool(pin.computeCollisions(manager, True))
+
+    def colliding(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[int]:
+        """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says
+        (None: the model's paddings); `distance` then measures them."""
+        self._last = None
+        gd, _ = self._subset(subset, margins, exact=True)
+        pin.computeCollisions(self.model, self.data, self.cm.geometry, gd, q, False)
+        results = gd.collisionResults
+        return [int(k) for k in self._entry(subset)[0] if results[int(k)].isCollision()]
+
+    def overlapping(self, q: np.ndarray, subset: str | np.ndarray, margins: np.ndarray) -> list[int]:
+        """The pairs of the subset whose bounding boxes, each grown by half its largest margin in `margins`, overlap at q
+        (the broad phase alone, no screen): every pair nearer than its margin is among them."""
+        self._last = None
+        _, manager = self._subset(subset, margins, exact=True)
+        if self._collect is None:
+            self._collect = pin.CollisionCallBackCollect(self.cm.geometry, self._gd)
+        pin.computeCollisions(self.model, self.data, manager, self._collect, q)
+        return [int(k) for k in self._collect.pair_indexes]
+
+    def distance(self, pair: int) -> float:
+        """The distance of a pair where the last check placed the geometries."""
+        return float(pin.computeDistance(self.cm.geometry, self._gd, pair).min_distance)
+
+    def colliding_pairs(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[tuple[str, str]]:
+        """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
+        objs, pairs = self.cm.geometry.geometryObjects, self.cm.geometry.collisionPairs
+        return [(objs[pairs[k].first].name, objs[pairs[k].second].name) for k in self.colliding(q, subset, margins)]

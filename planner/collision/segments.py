@@ -1,0 +1,197 @@
+"""The local planner: straight lines in joint space, checked densely enough that nothing is missed.
+
+Resolution (a bound on how far robot points move, not a joint-space step): along
+q(s) = qa + s (qb - qa), a point of geometry g moves at most sum_j |dq_j| r_j(g), where r_j(g)
+bounds the distance from joint j's axis to g (link offsets down the chain + g's farthest hull
+vertex, configuration-independent). Relative to each other, the two geometries of a pair move at
+most the sum of both bounds over the joints that change their relative pose (joints above both
+move them rigidly together), and their distance changes no faster than that. A pair padded by p
+(checked as colliding closer than p) whose checks pass at configurations between which it moves at
+most 2 (p - c) keeps distance >= c along the whole continuous motion: every intermediate relative
+position is within (p - c) of a checked one. A segment is checked at the fewest evenly spaced
+configurations that satisfy this for every pair of the subset, in van der Corput order (midpoint
+first) so that colliding segments fail early.
+
+Coarse first (`coarse` k > 1, for motions whose paddings are tight): the segment is checked at every
+k-th of those configurations with each pair padded by P = c + k (p - c), so that between two of them
+it moves at most 2 (P - c); where both ends of such an interval pass, the pair keeps c along it.
+Only the intervals next to a configuration that fails at P are checked at all their configurations
+(padding p). Same guarantee, far fewer checks where the motion stays away from things.
+"""
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+
+import numpy as np
+
+from planner.collision.checker import CollisionChecker, CollisionModel, pair_table
+from planner.core.results import frozen
+
+
+def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.ndarray:
+    """(n_geometries, nq) r_j(g): a bound on the distance from joint j's axis to geometry g (0 unless j moves g).
+    `known`: the rows of the model's first geometries, computed before (a model extended by one more body).
+
+    The first offset below j counts only across the axis (rotating about the axis keeps it); the
+    rest of the chain counts in full; the geometry's own extent is its farthest hull vertex
+    (a bounding sphere for primitives).
+    """
+    model = cm.robot.model
+    radii = np.zeros((len(cm.geometry.geometryObjects), model.nq))
+    skip = 0 if known is None else len(known)
+    radii[:skip] = known
+    objects = cm.geometry.geometryObjects
+    for g in range(skip, len(objects)):
+        obj = objects[g]
+        if obj.parentJoint == 0:
+            continue  # fixed in the world (obstacles, a static object): no joint moves it
+        axes = cm.robot.joint_axes
+        geom = obj.geometry
+        if hasattr(geom, "points"):
+            pts = np.asarray(geom.points()) @ obj.placement.rotation.T + obj.placement.translation
+            reach = float(np.linalg.norm(pts, axis=1).max())
+        else:
+            geom.computeLocalAABB()
+            reach = float(np.linalg.norm(obj.placement.act(np.asarray(geom.aabb_center)))) + float(geom.aabb_radius)
+        chain = list(model.supports[obj.parentJoint])[1:]
+        offsets = [model.jointPlacements[k].translation for k in chain]  # read once: each is a copy out of pinocchio
+        lengths = [float(np.linalg.norm(t)) for t in offsets]
+        for i, j in enumerate(chain):
+            if not model.joints[j].shortname().startswith(("JointModelR", "JointModelRevolute")):
+                raise ValueError(f"joint '{model.names[j]}' is not revolute: the displacement bound assumes revolute joints")
+            below = offsets[i + 1] if i + 1 < len(chain) else None
+            across = below - axes[j] * (below @ axes[j]) if below is not None else np.zeros(3)
+            rest = sum(lengths[i + 2:])
+            radii[g, model.joints[j].idx_q] = float(np.linalg.norm(across)) + rest + reach
+    return radii
+
+
+@functools.lru_cache(maxsize=4096)
+def van_der_corput(n: int) -> np.ndarray:
+    """The n parameters 0, 1/(n-1), ..., 1 in bisection order: ends first, then midpoints, coarse to fine (read-only:
+    computed once per n, as every segment of n checks asks for the same order)."""
+    if n <= 1:
+        return frozen(np.zeros(max(n, 0)))
+    order = [0, n - 1]
+    intervals = [(0, n - 1)]
+    while intervals:
+        finer = []
+        for a, b in intervals:
+            if b - a > 1:
+                m = (a + b) // 2
+                order.append(m)
+                finer += [(a, m), (m, b)]
+        intervals = finer
+    return frozen(np.asarray(order, dtype=float) / (n - 1))
+
+
+def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, object_clearance: float = 0.0) -> np.ndarray:
+    """(n_pairs,) p - c per pair: how much closer than its padding a pair may come between checks."""
+    keep = np.full(len(cm.ends), self_clearance)
+    keep[cm.subsets["env"]] = env_clearance
+    keep[cm.subsets.get("object", [])] = object_clearance
+    out = cm.paddings() - cm.twinned(keep)
+    if np.any(out <= 0):
+        raise ValueError("each padding must exceed the clearance it guarantees")
+    return out
+
+
+class SegmentChecker:
+    """Checks configurations and straight segments against named pair subsets (one per process); `coarse`: see the
+    module (1: every configuration at the paddings). `checker`: collision scratch data to share with other segment
+    checkers of the same geometry and pairs at other paddings (each passes its own with every check): pinocchio's
+    collision data is costly to make and to hold. `checks` counts this one's own checks."""
+
+    def __init__(self, cm: CollisionModel, env_clearance: float, self_clearance: float = 0.0, object_clearance: float = 0.0,
+                 radii: np.ndarray | None = None, coarse: int = 1, checker: CollisionChecker | None = None):
+        if coarse < 1:
+            raise ValueError(f"the coarse factor must be a whole number >= 1, got {coarse}")
+        if checker is not None and (checker.cm.geometry is not cm.geometry or checker.cm.ends is not cm.ends):
+            raise ValueError("a shared collision checker must be of the same geometry model and pairs")  # subsets may differ
+        self.cm = cm
+        self.checker = checker or cm.checker()
+        self.checks = 0
+        paddings = cm.paddings()
+        self._margins = pair_table(cm, paddings)
+        radii = geometry_radii(cm) if radii is None else radii
+        sweep = cm.relative_joints() * (radii[cm.ends[:, 0]] + radii[cm.ends[:, 1]])
+        allow = allowances(cm, env_clearance, self_clearance, object_clearance)
+        self._per_pair = sweep / (2.0 * allow)[:, None]
+        self._weights: dict[str, np.ndarray] = {}
+        self.coarse = int(coarse)
+        self._coarse_margins = pair_table(cm, paddings + (self.coarse - 1) * allow) if coarse > 1 else None
+
+    def in_collision(self, q: np.ndarray, subset: str, coarse: bool = False) -> bool:
+        """One check of q over a subset, at the paddings (or the coarse ones)."""
+        self.checks += 1
+        return self.checker.in_collision(q, self.cm.subsets[subset], margins=self._coarse_margins if coarse else self._margins)
+
+    def colliding_pairs(self, q: np.ndarray, subset: str) -> list[tuple[str, str]]:
+        """The subset's pairs colliding at q at the paddings, by geometry name (for messages)."""
+        return self.checker.colliding_pairs(q, self.cm.subsets[subset], self._margins)
+
+    def weights(self, subset: str) -> np.ndarray:
+        """(rows, nq) the subset's displacement weights per joint (computed once per subset)."""
+        if subset not in self._weights:
+            rows = np.ascontiguousarray(self._per_pair[self.cm.subsets[subset]])
+            # distinct rows, found by their bytes (np.unique(axis=0) sorts lexicographically: much slower)
+            _, first = np.unique(rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1]))).ravel(), return_index=True)
+            self._weights[subset] = rows[np.sort(first)]
+        return self._weights[subset]
+
+    def steps(self, qa: np.ndarray, qb: np.ndarray, subset: str) -> np.ndarray:
+        """Configurations checked on each segment qa[i] -> qb[i] (vectorised; both ends included)."""
+        sweep = np.abs(np.atleast_2d(qb) - np.atleast_2d(qa)) @ self.weights(subset).T
+        return np.ceil(sweep.max(axis=1, initial=0.0)).astype(int) + 1
+
+    def free(self, q: np.ndarray, subset: str) -> bool:
+        return not self.in_collision(q, subset)
+
+    def segment_free(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> bool:
+        """True if every check of the segment passes (`ends=False`: the two ends are known free)."""
+        return self.first_hit(qa, qb, subset, ends) is None
+
+    def first_hit(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> np.ndarray | None:
+        """The first configuration of the segment, in checking order, whose check fails; None when all pass."""
+        n, dq = int(self.steps(qa, qb, subset)[0]), qb - qa
+        if self._coarse_margins is not None and n > 2 * self.coarse + 1:
+            def hits(s: float, coarse: bool) -> bool:
+                return self.in_collision(qa + s * dq, subset, coarse)
+
+            s = coarse_first(n, self.coarse, hits, ends)
+            return None if s is None else qa + s * dq
+        s = van_der_corput(n)
+        for q in qa + np.outer(s if ends else s[2:], dq):
+            if self.in_collision(q, subset):
+                return q
+        return None
+
+
+def coarse_first(n: int, k: int, hits: Callable[[float, bool], bool], ends: bool = True) -> float | None:
+    """Where a segment checked at n evenly spaced configurations (parameters 0..1) fails, checked coarse first (see the
+    module); None when it passes. `hits(s, coarse)`: whether the check at s fails, at the coarse paddings or at the
+    paddings. Every k-th of (at least) n configurations is checked coarse (see two_level). `ends=False`: both ends are
+    known to pass at the paddings."""
+    m = -(-(n - 1) // k)  # coarse intervals; m * k >= n - 1 fine ones
+    return two_level(m + 1, m * k + 1, hits, ends)
+
+
+def two_level(n: int, m: int, hits: Callable[[float, bool], bool], ends: bool = True) -> float | None:
+    """Where a segment fails, checked at n evenly spaced configurations at coarse paddings and, only within the
+    intervals next to one that fails there, at the m (> n) evenly spaced configurations of its fine paddings; None
+    when it passes. `hits(s, coarse)`: whether the check at parameter s fails at the coarse or the fine paddings. The
+    coarse ones go in van der Corput order, one that fails there at once at the fine paddings too (a collision is found
+    early). Each interval between two checked configurations is then as short as the paddings both its ends passed at
+    need. `ends=False`: both ends are known to pass at the fine paddings."""
+    clear = np.zeros(n, dtype=bool)
+    for j in (van_der_corput(n) * (n - 1)).round().astype(int):
+        s = j / (n - 1)
+        clear[j] = not hits(s, True)
+        if not clear[j] and (ends or 0 < j < n - 1) and hits(s, False):
+            return s
+    for j in np.flatnonzero(~(clear[:-1] & clear[1:])):
+        for i in range(j * (m - 1) // (n - 1) + 1, -(-(j + 1) * (m - 1) // (n - 1))):  # strictly inside
+            if hits(i / (m - 1), False):
+                return i / (m - 1)
+    return None

@@ -1,0 +1,1 @@
+"""Run the method: steps, the pipeline and its runner, sessions, results, caches, paths, TOML reading, forked workers."""
