@@ -8,8 +8,9 @@ import pinocchio as pin
 import viser
 
 from planner.collision.checker import CollisionModel
+from planner.collision.shapes import to_trimesh
 
-from .meshes import coal_to_trimesh, poses_wxyz
+from .meshes import poses_wxyz
 
 ROBOT_STYLE = ((80, 150, 255), 0.35)
 ENV_STYLE = ((255, 170, 60), 0.3)
@@ -31,7 +32,7 @@ class CollisionLayer:
         self.colliding: frozenset[str] = frozenset()
         self.handles: dict[str, viser.MeshHandle] = {}
         for i, obj in enumerate(self.geometry.geometryObjects):
-            mesh = coal_to_trimesh(obj.geometry, obj.meshScale, grow=0.0 if i < self.n_robot else cm.params.env_padding)
+            mesh = to_trimesh(obj.geometry, obj.meshScale, grow=0.0 if i < self.n_robot else cm.params.env_padding)
             color, opacity = ROBOT_STYLE if i < self.n_robot else ENV_STYLE
             self.handles[obj.name] = server.scene.add_mesh_simple(
                 f"{root}/{obj.name}", mesh.vertices, mesh.faces, color=color, opacity=opacity, flat_shading=True,

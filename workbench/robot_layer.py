@@ -5,9 +5,10 @@ import numpy as np
 import pinocchio as pin
 import viser
 
+from planner.collision.shapes import to_trimesh
 from planner.model.robot import Robot
 
-from .meshes import coal_to_trimesh, poses_wxyz
+from .meshes import poses_wxyz
 from .rooted import Rooted
 from .scene_layer import DIM_OPACITY
 
@@ -24,7 +25,7 @@ class RobotLayer(Rooted):
         super().__init__(server, root)
         self.handles: list[viser.MeshHandle] = []
         for obj in self.geometry.geometryObjects:
-            mesh = coal_to_trimesh(obj.geometry, obj.meshScale)
+            mesh = to_trimesh(obj.geometry, obj.meshScale)
             rgb = tuple(int(255 * c) for c in np.asarray(obj.meshColor)[:3])
             self.handles.append(server.scene.add_mesh_simple(
                 f"{root}/{obj.name}", mesh.vertices, mesh.faces, color=rgb, cast_shadow=False, receive_shadow=False))

@@ -1,8 +1,10 @@
-"""A hand placed in the world at a grasp: its collision shapes against the environment or against the other hand.
+"""A hand placed at a grasp: its collision shapes against the object, the environment or the other hand.
 
-Used to filter grasp lists before any robot configuration is sought (paper IV-B): a grasp whose
-hand hits the support at the object's placement can never be executed, whatever the arm does.
-Shapes come from the standalone hand model (the hand URDF's geometries, meshes as convex hulls).
+The grasp search (paper IV-A.2) places the fingers one by one against the object's mesh and the
+fingers placed before (`ObjectTest`). Grasp lists are filtered before any robot configuration is
+sought (paper IV-B): a grasp whose hand hits the support at the object's placement can never be
+executed, whatever the arm does. Shapes come from the standalone hand model (the hand URDF's
+geometries, meshes as convex hulls).
 """
 from __future__ import annotations
 
@@ -10,9 +12,10 @@ from typing import TYPE_CHECKING
 
 import coal
 import numpy as np
+import trimesh
 
+from planner.collision.shapes import coal_mesh, transform3s
 from planner.model.environment import Environment
-from planner.model.geometry import transform3s
 from planner.model.hand_model import HandModel, load_hand_model
 
 if TYPE_CHECKING:
@@ -23,6 +26,33 @@ if TYPE_CHECKING:
 def posed_shapes(hand: HandModel, finger_q: np.ndarray, palm: np.ndarray) -> list[tuple[coal.CollisionGeometry, np.ndarray]]:
     """Every hand shape with its 4x4 world pose, the palm frame at `palm` and the fingers at `finger_q`."""
     return [(shape.geometry, palm @ pose) for shape, pose in hand.shape_poses(finger_q)]
+
+
+class ObjectTest:
+    """Shapes posed in the object's frame against the object's exact mesh, and against shapes placed before (no margin)."""
+
+    def __init__(self, mesh: trimesh.Trimesh):
+        self.object_geometry = coal_mesh(mesh)
+        self.identity = coal.Transform3s()
+        self.request = coal.CollisionRequest()
+
+    @staticmethod
+    def posed(geometry: coal.CollisionGeometry, pose: np.ndarray) -> tuple[coal.CollisionGeometry, coal.Transform3s]:
+        """A shape at a pose, as `hits_placed` takes it and the shapes placed before (the transform made once)."""
+        return geometry, transform3s(pose)
+
+    def hits_object(self, geometry: coal.CollisionGeometry, pose: np.ndarray) -> bool:
+        result = coal.CollisionResult()
+        return bool(coal.collide(geometry, transform3s(pose), self.object_geometry, self.identity, self.request, result))
+
+    def hits_placed(self, shape: tuple[coal.CollisionGeometry, coal.Transform3s], placed: list) -> bool:
+        """True if the shape (see `posed`) touches one of the shapes placed before."""
+        geometry, tf = shape
+        for other, other_tf in placed:
+            result = coal.CollisionResult()
+            if coal.collide(geometry, tf, other, other_tf, self.request, result):
+                return True
+        return False
 
 
 def _ensure_aabb(geometry: coal.CollisionGeometry) -> None:

@@ -1,6 +1,6 @@
 """Run independent jobs in forked worker processes that inherit the jobs (no pickling of models on the way in).
 
-Fork, not spawn: workers start at once and share the parent's read-only models (pinocchio, coal);
+Fork, not spawn: workers start at once and share the parent's read-only models (pinocchio's and the collision shapes);
 only the results travel back, pickled. Falls back to running inline where fork is unavailable.
 
 Workers never outlive their parent: each asks the kernel for SIGKILL when the thread that forked

@@ -16,14 +16,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import coal
 import numpy as np
 import trimesh
 
+from planner.collision.hand_placement import ObjectTest
+from planner.collision.shapes import sphere
 from planner.grasping.finger_workspace import FingerWorkspace
 from planner.grasping.object_model import ObjectModel
 from planner.grasping.quality import com_score, curvature_score, ellipsoid_alignment, force_closure
-from planner.model.geometry import coal_mesh, transform3s
 from planner.model.hand_model import FingerChain, HandModel
 
 MIN_CONTACTS = 3
@@ -72,26 +72,13 @@ class GraspSearch:
     def __init__(self, hand: HandModel, workspaces: tuple[FingerWorkspace, ...], obj: ObjectModel,
                  mesh: trimesh.Trimesh, p: SearchParams, limit_margin: float):
         self.hand, self.workspaces, self.obj, self.p = hand, workspaces, obj, p
-        self.object_geometry = coal_mesh(mesh)
-        self.identity = coal.Transform3s()
-        self.request = coal.CollisionRequest()
+        self.test = ObjectTest(mesh)
         self.seeds = [w.seeds() for w in workspaces]
         self.limits = [f.reduced_limits(limit_margin) for f in hand.fingers]
         self.torque_scale = obj.radius
-        self.tip_spheres = [coal.Sphere(f.tip_radius - p.contact_clearance) for f in hand.fingers]
+        self.tip_spheres = [sphere(f.tip_radius - p.contact_clearance) for f in hand.fingers]
         self.targets = [obj.points + f.tip_radius * obj.normals for f in hand.fingers]
         self.closing = [closing_direction(f) for f in hand.fingers]
-
-    def _hits_object(self, geometry: coal.CollisionGeometry, pose: np.ndarray) -> bool:
-        result = coal.CollisionResult()
-        return bool(coal.collide(geometry, transform3s(pose), self.object_geometry, self.identity, self.request, result))
-
-    def _hits_placed(self, geometry: coal.CollisionGeometry, tf: coal.Transform3s, placed: list) -> bool:
-        for other, other_tf in placed:
-            result = coal.CollisionResult()
-            if coal.collide(geometry, tf, other, other_tf, self.request, result):
-                return True
-        return False
 
     def _finger_fits(self, fi: int, shape_poses: np.ndarray, H: np.ndarray, placed: list, touching: bool) -> list | None:
         """The finger's shapes posed in the object frame when collision-free with the object and placed fingers, else None."""
@@ -100,12 +87,12 @@ class GraspSearch:
         for shape, pose in zip(finger.shapes, shape_poses):
             world = H @ pose
             probe = self.tip_spheres[fi] if (touching and shape.is_tip) else shape.geometry
-            if self._hits_object(probe, world):
+            if self.test.hits_object(probe, world):
                 return None
-            tf = transform3s(world)
-            if self._hits_placed(shape.geometry, tf, placed):
+            placed_shape = self.test.posed(shape.geometry, world)
+            if self.test.hits_placed(placed_shape, placed):
                 return None
-            posed.append((shape.geometry, tf))
+            posed.append(placed_shape)
         return posed
 
     def candidates(self, fi: int, H: np.ndarray, placed_normals: np.ndarray) -> np.ndarray:
@@ -161,7 +148,7 @@ class GraspSearch:
     def at_frame(self, H: np.ndarray) -> FrameGrasp:
         """The grasp at hand pose H (hand frame in the object frame), finger by finger, thumb first."""
         for shape in self.hand.body:
-            if self._hits_object(shape.geometry, H @ shape.placement):
+            if self.test.hits_object(shape.geometry, H @ shape.placement):
                 return FrameGrasp("body_collides")
         n = len(self.hand.fingers)
         qs = [f.open_q for f in self.hand.fingers]

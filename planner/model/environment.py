@@ -3,11 +3,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import coal
 import numpy as np
 import trimesh
 
-from planner.model.geometry import coal_mesh
+from planner.collision.shapes import Geometry, primitive
 
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "mesh": 0}
 
@@ -38,19 +37,9 @@ class Obstacle:
         m.apply_transform(self.pose)
         return m
 
-    def coal_shape(self) -> coal.CollisionGeometry:
-        """The obstacle's exact coal shape in its own frame."""
-        if self.shape == "box":
-            g = coal.Box(*self.size)
-        elif self.shape == "cylinder":
-            g = coal.Cylinder(self.size[0], self.size[1])
-        elif self.shape == "capsule":
-            g = coal.Capsule(self.size[0], self.size[1])
-        elif self.shape == "sphere":
-            g = coal.Sphere(self.size[0])
-        else:
-            g = coal_mesh(self.mesh)
-        return g
+    def coal_shape(self) -> Geometry:
+        """The obstacle's exact collision shape in its own frame."""
+        return primitive(self.shape, self.size, self.mesh)
 
 
 Environment = tuple[Obstacle, ...]

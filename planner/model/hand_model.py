@@ -11,13 +11,11 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
-import coal
 import numpy as np
 import pinocchio as pin
-import trimesh
 
+from planner.collision.shapes import Geometry, convex_geometry, is_sphere
 from planner.core.errors import InputError
-from planner.model.geometry import coal_convex
 from planner.model.robot import _load
 from planner.model.robot_spec import HandSpec
 
@@ -32,7 +30,7 @@ class Shape:
     name: str
     link: int
     placement: np.ndarray  # 4x4 in its joint's frame (the hand frame for the body)
-    geometry: coal.CollisionGeometry
+    geometry: Geometry
     is_tip: bool
 
 
@@ -182,14 +180,6 @@ def _axis(model: pin.Model, jid: int, spec: HandSpec) -> np.ndarray:
     raise InputError(spec.urdf, None, f"joint '{model.names[jid]}' is a {kind}: finger joints must be revolute")
 
 
-def _geometry(obj: pin.GeometryObject) -> coal.CollisionGeometry:
-    """The shape itself, meshes replaced by their (scaled) convex hulls."""
-    if isinstance(obj.geometry, coal.BVHModelBase):
-        vertices = np.asarray(obj.geometry.vertices()) * np.asarray(obj.meshScale)
-        return coal_convex(trimesh.convex.convex_hull(vertices))
-    return obj.geometry
-
-
 def build_hand_model(spec: HandSpec) -> HandModel:
     """Read the hand URDF named by a spec into finger chains and shapes, expressed in the palm frame."""
     model, collision, _ = _load(spec.urdf.read_text(), spec.urdf)
@@ -228,7 +218,7 @@ def build_hand_model(spec: HandSpec) -> HandModel:
     body = []
     for obj in collision.geometryObjects:
         if obj.parentJoint == 0:
-            body.append(Shape(obj.name, -1, (to_palm * obj.placement).homogeneous, _geometry(obj), False))
+            body.append(Shape(obj.name, -1, (to_palm * obj.placement).homogeneous, convex_geometry(obj), False))
             continue
         if obj.parentJoint not in owner:
             raise InputError(spec.urdf, None, f"geometry '{obj.name}' hangs on joint '{model.names[obj.parentJoint]}', "
@@ -236,9 +226,9 @@ def build_hand_model(spec: HandSpec) -> HandModel:
         fi, k = owner[obj.parentJoint]
         chain = chains[fi]
         placement = obj.placement.homogeneous
-        is_tip = (isinstance(obj.geometry, coal.Sphere) and k == len(chain["joints"]) - 1
+        is_tip = (is_sphere(obj.geometry) and k == len(chain["joints"]) - 1
                   and np.linalg.norm(placement[:3, 3] - chain["tip"][:3, 3]) < TIP_MATCH)
-        chain["shapes"].append(Shape(obj.name, k, placement, _geometry(obj), bool(is_tip)))
+        chain["shapes"].append(Shape(obj.name, k, placement, convex_geometry(obj), bool(is_tip)))
     fingers = tuple(FingerChain(**{**c, "shapes": tuple(c["shapes"])}) for c in chains)
     for f in fingers:
         if not np.all((f.open_q >= f.lower - 1e-9) & (f.open_q <= f.upper + 1e-9)):

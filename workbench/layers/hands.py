@@ -4,9 +4,10 @@ from __future__ import annotations
 import numpy as np
 import viser
 
+from planner.collision.shapes import to_trimesh
 from planner.model.hand_model import HandModel
 
-from ..meshes import coal_to_trimesh, matrix_wxyz
+from ..meshes import matrix_wxyz
 
 HAND_STYLE = ((200, 200, 210), 0.6)  # colour, opacity
 TIP_COLOR = (250, 200, 40)
@@ -23,7 +24,7 @@ class HandMeshes:
         self.frame = server.scene.add_frame(node, show_axes=False, visible=visible)
         self.shapes: list[viser.MeshHandle] = []
         for i, (shape, _) in enumerate(hand.shape_poses(hand.open_q)):
-            mesh = coal_to_trimesh(shape.geometry)
+            mesh = to_trimesh(shape.geometry)
             self.shapes.append(server.scene.add_mesh_simple(
                 f"{node}/shape_{i}", mesh.vertices, mesh.faces, color=TIP_COLOR if shape.is_tip else color, opacity=opacity,
                 flat_shading=True, cast_shadow=False, receive_shadow=False))
