@@ -39,11 +39,8 @@ def _roadmap(scene: Scene) -> Any:
 
 
 def _pairs(scene: Scene) -> Any:
-    from planner.collision.checker import (
-        CollisionParams,
-        robot_pair_set,
-        simplified_robot_geometry,
-    )
+    from planner.collision.checker import simplified_robot_geometry
+    from planner.collision.pairs import CollisionParams, robot_pair_set
 
     return robot_pair_set(scene.robot, simplified_robot_geometry(scene.robot), CollisionParams(prune_samples=20))
 
@@ -67,7 +64,7 @@ ENTRIES = {
     "roadmaps": Entry("roadmaps", "roadmap", _roadmap, lambda r: (r.node_q.tolist(), r.edges.tolist()),
                       "planner.roadmap.step.build_roadmap"),
     "collision_pairs": Entry("collision_pairs", "self-collision pair set", _pairs, lambda p: p,
-                             "planner.collision.checker.compute_pair_set"),
+                             "planner.collision.pairs.compute_pair_set"),
     "workspaces": Entry("workspaces", "workspaces", _workspaces, lambda ws: [w.centres.tolist() for w in ws],
                         "planner.grasping.finger_workspace.finger_workspace"),
     "objects": Entry("objects", "objects", _object, lambda o: o.points.tolist(), "planner.grasping.object_model.build_object_model"),

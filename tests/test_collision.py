@@ -6,7 +6,8 @@ import pinocchio as pin
 import pytest
 from sandbox import forbid
 
-from planner.collision.checker import CollisionParams, _candidate_pairs, compute_pair_set, robot_pair_set, simplified_robot_geometry
+from planner.collision.checker import simplified_robot_geometry
+from planner.collision.pairs import CollisionParams, _candidate_pairs, compute_pair_set, robot_pair_set
 from planner.handover.reach import reach
 from planner.model.geometry import se3
 
@@ -93,7 +94,7 @@ def test_pair_set_is_deterministic_and_cached(default_scene, tmp_path, monkeypat
     monkeypatch.setenv("REGRASP_CACHE", str(tmp_path))
     c = robot_pair_set(robot, gm, params)
     assert list(tmp_path.rglob("*.json")), "the pair set was not cached"
-    forbid(monkeypatch, "planner.collision.checker.compute_pair_set")
+    forbid(monkeypatch, "planner.collision.pairs.compute_pair_set")
     assert robot_pair_set(robot, gm, params) == c == a
 
 
@@ -156,7 +157,7 @@ def test_environment_padding(default_scene):
 def test_pairs_the_robot_spec_allows_are_never_checked():
     """Baxter's spec allows each upper-arm cover to touch its forearm (the cover's cylinder reaches past the elbow): no
     such pair is a candidate, and the count says how many were left out."""
-    from planner.collision.checker import geometry_link
+    from planner.collision.pairs import geometry_link
     from planner.model.robot import load_robot
     from planner.model.robot_spec import load_robot_spec
 

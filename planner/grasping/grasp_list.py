@@ -18,8 +18,8 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from planner.collision.checker import CollisionParams
 from planner.collision.hand_placement import ObstacleTest, environment_filter
+from planner.collision.pairs import CollisionParams
 from planner.core.bounds import bounded
 from planner.core.errors import RegraspError
 from planner.core.forked import available_cpus, forked_map

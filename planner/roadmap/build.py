@@ -12,7 +12,8 @@ from concurrent.futures import Executor
 import numpy as np
 import pinocchio as pin
 
-from planner.collision.checker import CollisionModel, CollisionParams, build_collision_model
+from planner.collision.checker import CollisionModel, build_collision_model
+from planner.collision.pairs import CollisionParams
 from planner.collision.segments import SegmentChecker
 from planner.core.forked import available_cpus, executor
 from planner.core.steps import Progress, no_progress

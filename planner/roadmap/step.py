@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.collision.checker import CODE_VERSION as PAIRS_VERSION
+from planner.collision.pairs import CODE_VERSION as PAIRS_VERSION
 from planner.core.results import load_result, read_only, save_result
 from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
 from planner.core.user_cache import cache_key as hash_key
