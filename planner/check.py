@@ -11,15 +11,15 @@ import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import coal
 import numpy as np
 
 from planner.collision.checker import CollisionModel, build_collision_model
+from planner.collision.object_obstacle import obstacles_penetrated
+from planner.collision.shapes import coal_mesh
+from planner.collision.with_object import object_at_rest
 from planner.core.errors import RegraspError
 from planner.handover.arms import ArmsParams, decide
 from planner.handover.reach import ReachResult, placement_reach
-from planner.model.environment import Obstacle
-from planner.model.geometry import coal_mesh, transform3s
 from planner.model.hand_model import load_hand_model
 from planner.model.object_mesh import OBJECT_LIMITS, likely_unit
 from planner.model.robot_spec import HandSpec
@@ -90,19 +90,7 @@ def object_collisions(scene: Scene, T: np.ndarray) -> list[str]:
     """Obstacles the object placed at T penetrates deeper than resting contact (it is tested raised by that)."""
     raised = T.copy()
     raised[2, 3] += RESTING_CONTACT
-    shape, tf = coal_mesh(scene.object_mesh), transform3s(raised)
-    request = coal.CollisionRequest()
-    hits = []
-    for ob in scene.environment:
-        result = coal.CollisionResult()
-        if coal.collide(shape, tf, ob.coal_shape(), transform3s(ob.pose), request, result):
-            hits.append(ob.name)
-    return hits
-
-
-def object_obstacle(scene: Scene, name: str, T: np.ndarray) -> Obstacle:
-    """The object at a placement, as a static obstacle for the robot."""
-    return Obstacle(f"object_{name}", "mesh", (), T, mesh=scene.object_mesh)
+    return obstacles_penetrated(scene.object_mesh, raised, scene.environment)
 
 
 @functools.lru_cache(maxsize=8)
@@ -141,8 +129,7 @@ def validate_task(scene: Scene, cm: CollisionModel | None = None) -> Validation:
     problems: list[str] = []
     configs = {}
     for name, q, T in (("initial", scene.q_initial, scene.object_initial), ("final", scene.q_final, scene.object_final)):
-        with_object = build_collision_model(robot, scene.environment + (object_obstacle(scene, name, T),), cm.params)
-        hits = with_object.checker().colliding_pairs(q)
+        hits = object_at_rest(cm, coal_mesh(scene.object_mesh), T).checker().colliding_pairs(q)
         configs[name] = hits
         if hits:
             problems.append(f"the robot's {name} configuration is in collision ({len(hits)} pairs)")

@@ -202,7 +202,7 @@ def test_lazy_transit_goes_around_the_object(example):
     from planner.collision.checker import build_collision_model
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import make_validity, transit_profile
-    from planner.model.geometry import coal_mesh
+    from planner.collision.shapes import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.transit import LazyTransit, TransitStats
 
@@ -259,7 +259,7 @@ def test_rrt_reconnects_what_the_graph_cannot(example):
     from planner.collision.checker import build_collision_model
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import make_validity, transit_profile
-    from planner.model.geometry import coal_mesh
+    from planner.collision.shapes import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.transit import LazyTransit, TransitStats
 
@@ -293,7 +293,7 @@ def carried(example):
     from planner.collision.checker import build_collision_model
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import make_validity, transit_profile
-    from planner.model.geometry import coal_mesh
+    from planner.collision.shapes import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.transit import LazyTransit, TransitStats
 
@@ -601,7 +601,7 @@ def test_clearances_measure_exactly_the_pairs_nearer_than_far():
     from planner.collision.checker import build_collision_model
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import Clearances, far, transit_profile
-    from planner.model.geometry import coal_convex, coal_mesh
+    from planner.collision.shapes import coal_convex, coal_mesh
     from planner.model.task import find_task, load_task
 
     scene = load_task(find_task("default"))
@@ -687,7 +687,8 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
     there checked graded cost a fraction of the checks at paddings fitted to the 3 mm throughout, and each one it passes
     keeps the hand off the statuette by the independent check at ten times the fitted resolution. Its paddings must be
     ordered."""
-    from planner.collision.situation import OBJECT, Situation
+    from planner.collision.situation import Situation
+    from planner.collision.with_object import OBJECT
     from planner.collision.validity import Graded
     from planner.core.session import Session
     from planner.motion.result import PHASES
@@ -749,7 +750,7 @@ def test_the_hull_screen_changes_no_answer(example):
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import make_validity, transit_profile
     from planner.core.session import Session
-    from planner.model.geometry import coal_convex, coal_mesh
+    from planner.collision.shapes import coal_convex, coal_mesh
     from planner.motion.result import PHASES
 
     scene, roadmap, _ = example

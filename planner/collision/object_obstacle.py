@@ -1,24 +1,26 @@
-"""The robot's collision model with the manipulated object in it, as one more obstacle that can be moved.
+"""The robot's collision model with the manipulated object in it, static among the obstacles and moved by each check.
 
 The grasp, exchange and place configurations (paper V-C) are checked against self-collision, the
 environment and the object at its pose. The hands holding the object touch it by construction (their
 contacts were checked with a clearance when the grasp was made), so their pairs with the object are
 left out; every other robot link is checked against it. The object against the static obstacles is a
 separate test (`object_hits_environment`): at the initial and final placements it rests on its support.
+`obstacles_penetrated` names the obstacles the object at a pose is inside of (the task's check).
 """
 from __future__ import annotations
 
 import coal
 import numpy as np
 import pinocchio as pin
+import trimesh
 
-from planner.collision.checker import CollisionChecker, CollisionParams, build_collision_model
+from planner.collision.checker import CollisionChecker, build_collision_model
 from planner.collision.hand_placement import ObstacleTest
-from planner.model.environment import Obstacle
-from planner.model.geometry import coal_mesh
+from planner.collision.pairs import CollisionParams
+from planner.collision.shapes import coal_mesh, transform3s
+from planner.collision.with_object import object_at_rest
+from planner.model.environment import Environment
 from planner.model.task import Scene
-
-OBJECT = "object"
 
 
 class ObjectCollision:
@@ -30,17 +32,14 @@ class ObjectCollision:
 
     def __init__(self, scene: Scene, params: CollisionParams = CollisionParams()):
         robot = scene.robot
-        cm = build_collision_model(robot, scene.environment + (Obstacle(OBJECT, "mesh", (), np.eye(4), mesh=scene.object_mesh),), params)
-        names = [o.name for o in cm.geometry.geometryObjects]
-        self.index = names.index(f"env/{OBJECT}")
-        pairs = cm.geometry.collisionPairs
-        with_object = np.array([self.index in (p.first, p.second) for p in pairs])
-        other = np.array([p.second if p.first == self.index else p.first for p in pairs])
-        part = np.array(cm.parts + ("env",) * (len(names) - cm.n_robot_geoms))
-        k = np.arange(len(pairs))
+        cm = object_at_rest(build_collision_model(robot, scene.environment, params), coal_mesh(scene.object_mesh), np.eye(4))
+        self.index = len(cm.geometry.geometryObjects) - 1  # the object, added last
+        k = np.arange(len(cm.ends))
+        with_object = np.isin(k, cm.subsets["object"])
+        part = np.array(cm.parts)[cm.ends[:, 0]]  # each pair's first geometry: a robot one (the object's partner)
         subsets = {"robot": k[~with_object]}
         for holding in [()] + [(a,) for a in robot.spec.arm_names] + [tuple(robot.spec.arm_names)]:
-            held = np.isin(part[other], [f"{a}_hand" for a in holding])
+            held = np.isin(part, [f"{a}_hand" for a in holding])
             subsets[self.subset(holding)] = k[~with_object | ~held]
         self.model = cm.with_subsets(subsets)
         self.checker: CollisionChecker = self.model.checker()
@@ -70,3 +69,14 @@ class ObjectCollision:
         return [(cm.geometry.geometryObjects[i].geometry, gd.oMg[i].homogeneous.copy())
                 for i in range(cm.n_robot_geoms) if cm.parts[i] in parts]
 
+
+def obstacles_penetrated(mesh: trimesh.Trimesh, T: np.ndarray, environment: Environment) -> list[str]:
+    """The names of the obstacles the object's mesh at world pose T collides with (no margin)."""
+    shape, tf = coal_mesh(mesh), transform3s(T)
+    request = coal.CollisionRequest()
+    hits = []
+    for ob in environment:
+        result = coal.CollisionResult()
+        if coal.collide(shape, tf, ob.coal_shape(), transform3s(ob.pose), request, result):
+            hits.append(ob.name)
+    return hits

@@ -22,15 +22,11 @@ import dataclasses
 import functools
 from dataclasses import dataclass
 
-import coal
 import numpy as np
-import pinocchio as pin
 
-from planner.collision.checker import CollisionModel, joint_support
-from planner.model.geometry import se3
-
-OBJECT = "object"
-OBJECT_PAIRS = "object mesh"  # the subset of every pair of the object's mesh (with the robot and the obstacles)
+from planner.collision.checker import CollisionModel
+from planner.collision.shapes import Geometry
+from planner.collision.with_object import OBJECT_PAIRS, moving_geometries, with_object
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,8 +65,8 @@ def finger_geometries(cm: CollisionModel, arm: str) -> np.ndarray:
                      if o.parentJoint > 0 and model.joints[o.parentJoint].idx_q in fingers], dtype=np.int64)
 
 
-def situation_model(cm: CollisionModel, shape: coal.CollisionGeometry, situation: Situation,
-                    moved_hands: tuple[str, ...], moving: np.ndarray, hull: coal.CollisionGeometry | None = None) -> CollisionModel:
+def situation_model(cm: CollisionModel, shape: Geometry, situation: Situation,
+                    moved_hands: tuple[str, ...], moving: np.ndarray, hull: Geometry | None = None) -> CollisionModel:
     """A copy of `cm` with the object in `situation` and the subsets 'object', 'changed' and 'moving' (see the module):
     'moving' and 'changed' keep only the pairs whose relative pose the configuration indices `moving` change. With
     `hull` (the object's convex hull), every pair of the object has a screening twin with the hull, in no subset: a
@@ -91,66 +87,36 @@ def for_motion(base: CollisionModel, moved_hands: tuple[str, ...], moving: np.nd
     return base.with_subsets({"moving": np.flatnonzero(changes), "changed": np.flatnonzero(changes & changed)})
 
 
-def situation_base(cm: CollisionModel, shape: coal.CollisionGeometry, situation: Situation,
-                   hull: coal.CollisionGeometry | None = None) -> CollisionModel:
+def situation_base(cm: CollisionModel, shape: Geometry, situation: Situation, hull: Geometry | None = None) -> CollisionModel:
     """A copy of `cm` with the object in `situation` (and its hull screening it: see situation_model), keeping only the
     pairs some joint moves relative to each other; subsets 'object' (robot–object pairs) and OBJECT_PAIRS (every pair of
-    the object's own mesh), the obstacle pairs in 'env'."""
+    the object's own mesh), the obstacle pairs in 'env' (see planner/collision/with_object.py)."""
     robot = cm.robot
-    gm = cm.geometry.copy()
-    objs = gm.geometryObjects
-    n_geoms = len(objs)
-    env = [e for e in range(cm.n_robot_geoms, n_geoms) if objs[e].name.removeprefix("env/") not in situation.support]
-    skip = set(situation.touching)
+    objs = cm.geometry.geometryObjects
     if situation.holder is None:
-        parent, placement = 0, situation.pose
-        robot_partners = [g for g in range(cm.n_robot_geoms) if objs[g].parentJoint > 0 and objs[g].name not in skip]
-        env_partners = []
+        model = with_object(cm, shape, 0, situation.pose, moving_geometries(cm, situation.touching), (), hull)
     else:
         palm = robot.model.frames[robot.frame_id(robot.palm_frame(situation.holder))]
-        parent, placement = palm.parentJoint, palm.placement.homogeneous @ np.linalg.inv(situation.pose)
         hand = f"{situation.holder}_hand"
-        robot_partners = [g for g in range(cm.n_robot_geoms) if cm.parts[g] != hand and objs[g].name not in skip]
-        env_partners = env
-    bodies = [(OBJECT, shape)] + ([] if hull is None else [(f"{OBJECT} hull", hull)])
-    for name, geometry in bodies:
-        gm.addGeometryObject(pin.GeometryObject(name, parent, 0, se3(placement), geometry))
-    o = n_geoms
-    n_pairs = len(gm.collisionPairs)
-    partners = env_partners + robot_partners
-    for body in range(len(bodies)):
-        for g in partners:
-            gm.addCollisionPair(pin.CollisionPair(g, o + body))
-    new_env = np.arange(n_pairs, n_pairs + len(env_partners))
-    new_robot = np.arange(n_pairs + len(env_partners), n_pairs + len(partners))
-    new = np.arange(n_pairs, n_pairs + len(partners))
-    subsets = {**cm.subsets,
-               "all": np.concatenate([cm.subsets["all"], new]),
-               "env": np.concatenate([cm.subsets["env"], new_env]),
-               "object": new_robot, OBJECT_PAIRS: new}
-    ends = np.concatenate([cm.ends] + [np.array([(g, o + body) for g in partners], np.int64).reshape(-1, 2)
-                                       for body in range(len(bodies))])
-    twins = None
-    if hull is not None:  # the hull's pairs stand for the mesh's
-        twins = np.full(len(ends), -1, dtype=np.int64)
-        twins[n_pairs + len(partners):] = new
-    support = np.concatenate([cm.support, joint_support(robot.model, [parent] * len(bodies))])
-    support.setflags(write=False)  # the model is shared read-only
-    out = dataclasses.replace(cm, geometry=gm, subsets=subsets, ends=ends, support=support, twins=twins)
-    return _moving_only(out, out.relative_joints().any(axis=1))
+        robot_partners = [g for g in range(cm.n_robot_geoms) if cm.parts[g] != hand and objs[g].name not in situation.touching]
+        env = [e for e in range(cm.n_robot_geoms, len(objs)) if objs[e].name.removeprefix("env/") not in situation.support]
+        model = with_object(cm, shape, palm.parentJoint, palm.placement.homogeneous @ np.linalg.inv(situation.pose),
+                            robot_partners, env, hull)
+    return _moving_only(model, model.relative_joints().any(axis=1))
 
 
 def _moving_only(cm: CollisionModel, keep: np.ndarray) -> CollisionModel:
-    """`cm` with the pairs `keep` (a flag per pair) alone in its geometry model (changed in place: situation_base's own
-    copy), ordered as pinocchio orders them (by their two geometry indices), its subsets renumbered: no motion checks
-    another pair, and pinocchio's collision data of a model costs memory per pair to allocate and to free."""
+    """A copy of `cm` with the pairs `keep` (a flag per pair) alone in its geometry model, ordered as pinocchio orders
+    them (by their two geometry indices), its subsets renumbered: no motion checks another pair, and pinocchio's
+    collision data of a model costs memory per pair to allocate and to free."""
     ends = np.sort(cm.ends[keep], axis=1)
     order = np.lexsort((ends[:, 1], ends[:, 0]))
     ends = ends[order]
     n = len(cm.geometry.geometryObjects)
     table = np.zeros((n, n), dtype=bool)
     table[ends[:, 0], ends[:, 1]] = True
-    cm.geometry.setCollisionPairs(table, True)
+    gm = cm.geometry.copy()
+    gm.setCollisionPairs(table, True)
     renumber = np.full(len(cm.ends), -1, dtype=np.int64)
     renumber[np.flatnonzero(keep)[order]] = np.arange(len(ends))
     subsets = {name: np.sort(renumber[idx][renumber[idx] >= 0]) for name, idx in cm.subsets.items()}
@@ -159,5 +125,4 @@ def _moving_only(cm: CollisionModel, keep: np.ndarray) -> CollisionModel:
         twins = np.full(len(ends), -1, dtype=np.int64)
         screening = np.flatnonzero((cm.twins >= 0) & keep)
         twins[renumber[screening]] = renumber[cm.twins[screening]]
-    ends.setflags(write=False)
-    return dataclasses.replace(cm, subsets=subsets, ends=ends, twins=twins)
+    return dataclasses.replace(cm, geometry=gm, subsets=subsets, ends=ends, twins=twins)
