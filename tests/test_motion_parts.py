@@ -200,9 +200,9 @@ def example(tmp_path_factory):
 @pytest.mark.slow
 def test_lazy_transit_goes_around_the_object(example):
     from planner.collision.checker import build_collision_model
+    from planner.collision.shapes import coal_mesh
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import make_validity, transit_profile
-    from planner.collision.shapes import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.transit import LazyTransit, TransitStats
 
@@ -257,9 +257,9 @@ def test_rrt_reconnects_what_the_graph_cannot(example):
     import dataclasses
 
     from planner.collision.checker import build_collision_model
+    from planner.collision.shapes import coal_mesh
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import make_validity, transit_profile
-    from planner.collision.shapes import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.transit import LazyTransit, TransitStats
 
@@ -291,9 +291,9 @@ def carried(example):
     import pinocchio as pin
 
     from planner.collision.checker import build_collision_model
+    from planner.collision.shapes import coal_mesh
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import make_validity, transit_profile
-    from planner.collision.shapes import coal_mesh
     from planner.motion.graph import MotionGraph
     from planner.motion.transit import LazyTransit, TransitStats
 
@@ -599,9 +599,9 @@ def test_clearances_measure_exactly_the_pairs_nearer_than_far():
     import pinocchio as pin
 
     from planner.collision.checker import build_collision_model
+    from planner.collision.shapes import coal_convex, coal_mesh
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import Clearances, far, transit_profile
-    from planner.collision.shapes import coal_convex, coal_mesh
     from planner.model.task import find_task, load_task
 
     scene = load_task(find_task("default"))
@@ -688,8 +688,8 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
     keeps the hand off the statuette by the independent check at ten times the fitted resolution. Its paddings must be
     ordered."""
     from planner.collision.situation import Situation
-    from planner.collision.with_object import OBJECT
     from planner.collision.validity import Graded
+    from planner.collision.with_object import OBJECT
     from planner.core.session import Session
     from planner.motion.result import PHASES
 
@@ -747,10 +747,10 @@ def test_the_hull_screen_changes_no_answer(example):
     import coal
 
     from planner.collision.checker import build_collision_model
+    from planner.collision.shapes import coal_convex, coal_mesh
     from planner.collision.situation import Situation, situation_model
     from planner.collision.validity import make_validity, transit_profile
     from planner.core.session import Session
-    from planner.collision.shapes import coal_convex, coal_mesh
     from planner.motion.result import PHASES
 
     scene, roadmap, _ = example
