@@ -16,7 +16,9 @@ from planner.collision.segments import SegmentChecker, coarse_first, two_level, 
 from planner.core.results import save_result
 from planner.model.environment import Obstacle
 from planner.model.geometry import pose
-from planner.roadmap import Roadmap, RoadmapParams, RoadmapPlanner, roadmap_for
+from planner.motion.graph import INVALID, MotionGraph, PhaseStatus
+from planner.motion.query import RoadmapQuery
+from planner.roadmap import Roadmap, RoadmapParams, roadmap_for
 from planner.roadmap import build as roadmap_build
 from planner.roadmap.build import build_roadmap, roadmap_collision_model, segment_checker
 from planner.roadmap.step import session_roadmap_seed
@@ -148,27 +150,34 @@ def test_thin_wall_between_two_configurations_is_never_crossed(default_scene, co
 
 
 def test_query_path_starts_and_ends_where_asked_and_is_free(default_scene, small, oracle):
-    planner = RoadmapPlanner(default_scene, small, SMALL)
+    """The robot-alone query (the motion's graph and lazy transit on the roadmap's own checks) from the initial
+    configuration to the node of the largest component farthest from it: a path the oracle finds free, the graph
+    left as it was."""
+    query = RoadmapQuery(default_scene, small, SMALL)
     start = default_scene.q_initial
-    near = planner._connections(start, 30, 1)
-    assert near, "the start must connect to the small roadmap"
-    same = np.flatnonzero(small.node_component == small.node_component[near[0]])
-    goal_node = same[np.argmax(np.linalg.norm(small.node_q[same] - start, axis=1))]
-    goal = small.node_q[goal_node]
-    result = planner.query(start, goal)
+    largest = np.flatnonzero(small.node_component == np.argmax(np.bincount(small.node_component)))
+    goal = small.node_q[largest[np.argmax(np.linalg.norm(small.node_q[largest] - start, axis=1))]]
+    result = query.query(start, goal)
     assert result.found, result.message
     assert np.array_equal(result.path[0], start) and np.array_equal(result.path[-1], goal)
+    assert result.checks > 0 and np.isclose(result.length, np.linalg.norm(np.diff(result.path, axis=0), axis=1).sum())
     for qa, qb in zip(result.path[:-1], result.path[1:]):
         assert not _segment_collisions(oracle, qa, qb)
-    assert len(planner.graph.q) == len(small.node_q), "a query must leave the graph as it was"
+    assert len(query.graph.q) == len(small.node_q), "a query must leave the graph as it was"
+    moved = goal.copy()
+    moved[np.setdiff1d(np.arange(len(goal)), query.space.idx)[0]] += 0.1
+    with pytest.raises(ValueError, match="transit only"):
+        query.query(start, moved)
 
 
-def test_graph_edges_can_be_invalidated(default_scene, small):
-    planner = RoadmapPlanner(default_scene, small, SMALL)
-    u, v = small.edges[0]
-    assert planner.graph.shortest_path(int(u), int(v)) == [u, v]
-    planner.graph.invalidate([0])
-    assert planner.graph.shortest_path(int(u), int(v)) != [u, v]
+def test_graph_edges_marked_invalid_are_avoided(small):
+    graph = MotionGraph(small)
+    status = PhaseStatus(graph)
+    u, v = (int(n) for n in graph.edges[0])
+    weights = np.ones(len(graph.edges))
+    assert status.shortest_path(weights, u, v) == [u, v]
+    status.edge[graph.edge_id(u, v)] = INVALID
+    assert status.shortest_path(weights, u, v) != [u, v]
 
 
 def _files(roadmap: Roadmap, folder: Path) -> dict[str, bytes]:

@@ -88,7 +88,10 @@ def test_example_grasp_lists_are_drawn_and_a_rank_is_chosen_in_the_browser(brows
             assert f"| epsilon | {eps} |" in pick.scores.content
             page.get_by_text("Rank 5", exact=False).first.wait_for(timeout=10_000)
             assert page.get_by_role("cell", name=eps, exact=True).count() > 0, "the scores table does not show rank 5's epsilon"
-            # the finger sphere hierarchies, in the hand frame
+            # on request, what the search worked on: the object's point set, the finger sphere hierarchies in the hand frame
+            without_points = _settled(page)
+            page.get_by_label("Object point set").first.click()
+            assert _until_changed(page, without_points) > CHANGED, "showing the object's point set changed nothing"
             with_spheres = _settled(page)
             page.get_by_label("Finger sphere hierarchies").first.click()
             assert _until_changed(page, with_spheres) > CHANGED, "showing the finger sphere hierarchies changed nothing"

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -30,7 +31,7 @@ from planner.grasping.finger_workspace import FingerWorkspace, WorkspaceParams, 
 from planner.grasping.frames import box_grid, hopf_rotations
 from planner.grasping.object_model import ObjectModel, mesh_bytes, object_model
 from planner.grasping.search import OUTCOMES, FrameGrasp, GraspSearch, SearchParams
-from planner.model.hand_model import HandModel, load_hand_model
+from planner.model.hand_model import load_hand_model
 from planner.model.robot_spec import HandSpec, RobotSpec
 
 if TYPE_CHECKING:
@@ -173,8 +174,9 @@ def grasp_frames(mesh: trimesh.Trimesh, centre: np.ndarray, p: GraspParams, seed
     return H.reshape(-1, 4, 4)
 
 
-def _object(mesh: trimesh.Trimesh, hand: HandModel, p: GraspParams) -> ObjectModel:
-    return object_model(mesh, p.point_step * min(f.tip_radius for f in hand.fingers))
+def search_object(mesh: trimesh.Trimesh, tip_radius: Sequence[float], p: GraspParams) -> ObjectModel:
+    """The object model a hand with these fingertip radii searches: points spaced by the smallest radius."""
+    return object_model(mesh, p.point_step * min(tip_radius))
 
 
 def _run_frames(search: GraspSearch, frames: np.ndarray, workers: int, progress: Progress) -> list[FrameGrasp]:
@@ -209,7 +211,7 @@ def compute_grasp_list(spec: HandSpec, arm: str, mesh: trimesh.Trimesh, p: Grasp
     workers = min(2, available_cpus()) if workers is None else workers
     hand = load_hand_model(spec)
     progress(0.0, "object point set and finger workspaces")
-    obj = _object(mesh, hand, p)
+    obj = search_object(mesh, [f.tip_radius for f in hand.fingers], p)
     workspaces = hand_workspaces(hand, p.workspace())
     search = GraspSearch(hand, workspaces, obj, mesh, p.search(), p.limit_margin)
     frames = grasp_frames(mesh, grasp_centre(workspaces), p, seed)

@@ -13,11 +13,10 @@ import copy
 
 import numpy as np
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, dijkstra
 
 from planner.core.results import frozen
 from planner.motion.space import JointSpace
-from planner.roadmap.query import shortest_path
 from planner.roadmap.result import Roadmap
 
 UNKNOWN, VALID, INVALID = 0, 1, -1
@@ -101,6 +100,19 @@ class PhaseStatus:
         n = len(self.graph.q)
         m = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
         return connected_components(m, directed=False)[1]
+
+
+def shortest_path(n: int, edges: np.ndarray, weights: np.ndarray, source: int, target: int) -> list[int] | None:
+    """Node ids of a shortest path (Dijkstra) over undirected weighted edges among n nodes, or None."""
+    # a zero-length edge would vanish from a sparse matrix: weigh every edge at least a tiny bit
+    graph = coo_matrix((np.maximum(weights, 1e-12), (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+    dist, pred = dijkstra(graph, directed=False, indices=source, return_predecessors=True)
+    if not np.isfinite(dist[target]):
+        return None
+    path = [target]
+    while path[-1] != source:
+        path.append(int(pred[path[-1]]))
+    return path[::-1]
 
 
 def _key(u: int, v: int) -> tuple[int, int]:

@@ -1,6 +1,5 @@
 """The offline multi-arm roadmap (paper V-A): per-arm Vis-PRM roadmaps composed into the Super Graph."""
-from planner.roadmap.query import Graph, QueryResult, RoadmapPlanner
 from planner.roadmap.result import Roadmap, RoadmapParams
 from planner.roadmap.step import STEP, roadmap_for
 
-__all__ = ["Graph", "QueryResult", "Roadmap", "RoadmapParams", "RoadmapPlanner", "STEP", "roadmap_for"]
+__all__ = ["Roadmap", "RoadmapParams", "STEP", "roadmap_for"]

@@ -1,6 +1,7 @@
-"""The `pick_grasps` / `place_grasps` steps drawn (paper IV-A, figs. 2-3): the object's point set coloured by
-kd-tree leaf at the object's placement, and a rank selector: the chosen grasp's hand (its collision shapes),
-contact points, normals, friction cones and scores; optionally the fingers' workspace sphere hierarchies."""
+"""The `pick_grasps` / `place_grasps` steps drawn (paper IV-A, figs. 2-3): a rank selector and the chosen grasp's hand
+(its collision shapes), contact points, normals, friction cones and scores, at the object's placement. On request, what
+the search worked on: the object's point set coloured by kd-tree leaf and the fingers' workspace sphere hierarchies
+(from the planner's `grasping.figures`; a replay draws the saved list alone)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,9 +9,8 @@ import trimesh
 import viser
 
 from planner.core.session import Session
-from planner.grasping.finger_workspace import hand_workspaces
+from planner.grasping.figures import finger_spheres, object_points
 from planner.grasping.grasp_list import GraspList, hand_spec_of
-from planner.grasping.object_model import object_model
 from planner.model.hand_model import HandModel, load_hand_model
 from planner.model.task import Scene
 
@@ -69,16 +69,21 @@ class GraspsLayer(StepLayer):
                  session: Session | None = None):
         super().__init__(server, scene, root, workbench, session)
         self.rank: viser.GuiDropdownHandle | None = None
+        self.show_points: viser.GuiCheckboxHandle | None = None
         self.show_spheres: viser.GuiCheckboxHandle | None = None
         self.scores: viser.GuiMarkdownHandle | None = None
         self.result: GraspList | None = None
         self.hand_model: HandModel | None = None
         self.hand: HandMeshes | None = None
         self.shown_rank: int | None = None
-        self._sphere_handles: list[viser.MeshHandle] = []
+        self._points_handle: viser.PointCloudHandle | None = None
+        self._sphere_handles: list[viser.MeshHandle] | None = None  # None: not drawn yet
 
     def update(self, result: GraspList) -> None:
         self.remove_folder()
+        for handle in ([self._points_handle] if self._points_handle is not None else []) + (self._sphere_handles or []):
+            handle.remove()  # another list's figures
+        self._points_handle, self._sphere_handles = None, None
         self.result = result
         scene = self.scene
         wxyz, xyz = matrix_wxyz(self.object_pose)
@@ -86,22 +91,9 @@ class GraspsLayer(StepLayer):
         self.server.scene.add_frame(obj_node, show_axes=False, wxyz=wxyz, position=xyz)
         hand = load_hand_model(hand_spec_of(scene.robot.spec, result.hand))
         self.hand_model = hand
-        params = self.params_of(self.step)
-        model = object_model(scene.object_mesh, params.point_step * min(result.tip_radius))
-        self.server.scene.add_point_cloud(f"{obj_node}/points", model.points.astype(np.float32), leaf_colors(model.leaf_ids()),
-                                          point_size=POINT_SIZE, point_shape="circle", precision="float32")
         arms = scene.robot.spec.arm_names
         color = ARM_COLORS[arms.index(result.hand) % len(ARM_COLORS)] if result.hand in arms else HAND_STYLE[0]
         self.hand = HandMeshes(self.server, f"{obj_node}/hand", hand, color=color, opacity=1.0, visible=False)
-        self._sphere_handles = []
-        for i, ws in enumerate(hand_workspaces(hand, params.workspace())):
-            if len(ws.radii) == 0:
-                continue
-            mesh = spheres_mesh(ws.centres, ws.radii)
-            self._sphere_handles.append(self.server.scene.add_mesh_simple(
-                f"{obj_node}/hand/spheres_{hand.finger_names[i]}", mesh.vertices, mesh.faces,
-                color=FINGER_COLORS[i % len(FINGER_COLORS)], opacity=SPHERE_OPACITY, cast_shadow=False, receive_shadow=False,
-                visible=False))
         self._build_gui(result)
         self.poses = {}
         if len(result):
@@ -115,8 +107,11 @@ class GraspsLayer(StepLayer):
                 labels = self.rank_labels(result)
                 self.rank = gui.add_dropdown("Rank", labels, initial_value=labels[0], hint="Grasps best first: pick one to see it")
                 self.rank.on_update(self._rank_chosen)
+            self.show_points = gui.add_checkbox("Object point set", False, hint="The points the search placed fingertips on, "
+                                                "coloured by kd-tree leaf")
+            self.show_points.on_update(lambda _: self.set_points_visible(self.show_points.value))
             self.show_spheres = gui.add_checkbox("Finger sphere hierarchies", False)
-            self.show_spheres.on_update(lambda _: self._set_spheres_visible(self.show_spheres.value))
+            self.show_spheres.on_update(lambda _: self.set_spheres_visible(self.show_spheres.value))
             self.scores = gui.add_markdown(self.summary(result))
 
     @property
@@ -151,7 +146,32 @@ class GraspsLayer(StepLayer):
         fingers = ", ".join(plain(c["finger"]) for c in r.contacts(rank))
         return f"**Rank {rank + 1}** of {len(r)} — contacts: {fingers}\n\n| score | value |\n|---|---|\n{rows}\n\n{self.summary(r)}"
 
-    def _set_spheres_visible(self, visible: bool) -> None:
+    def set_points_visible(self, visible: bool) -> None:
+        """Show or hide the object's point set, asking the planner for it the first time it is shown."""
+        if self._points_handle is None:
+            if not visible:
+                return
+            assert self.result is not None
+            model = object_points(self.scene.object_mesh, self.result, self.params_of(self.step))
+            self._points_handle = self.server.scene.add_point_cloud(
+                f"{self.name}/object/points", model.points.astype(np.float32), leaf_colors(model.leaves),
+                point_size=POINT_SIZE, point_shape="circle", precision="float32")
+        self._points_handle.visible = visible
+
+    def set_spheres_visible(self, visible: bool) -> None:
+        """Show or hide the fingers' workspace spheres, asking the planner for them the first time they are shown."""
+        if self._sphere_handles is None:
+            if not visible:
+                return
+            hand = self.hand_model
+            assert hand is not None
+            self._sphere_handles = []
+            for ws in finger_spheres(hand, self.params_of(self.step)):
+                mesh = spheres_mesh(ws.centres, ws.radii)
+                self._sphere_handles.append(self.server.scene.add_mesh_simple(
+                    f"{self.name}/object/hand/spheres_{ws.finger}", mesh.vertices, mesh.faces,
+                    color=FINGER_COLORS[hand.finger_names.index(ws.finger) % len(FINGER_COLORS)], opacity=SPHERE_OPACITY,
+                    cast_shadow=False, receive_shadow=False))
         for h in self._sphere_handles:
             h.visible = visible
 
@@ -180,7 +200,7 @@ class GraspsLayer(StepLayer):
 
     def remove_folder(self) -> None:
         super().remove_folder()
-        self.rank = self.show_spheres = self.scores = None
+        self.rank = self.show_points = self.show_spheres = self.scores = None
 
 
 class PickGraspsLayer(GraspsLayer):

@@ -4,7 +4,8 @@ Each wrist's moves along the Super Graph's edges are drawn, from its position at
 position at the other, a move that several edges share once (all segments in one `add_line_segments`
 call: viser is slow to show thousands of separate nodes). A wrist has its arm's colour; the largest
 components get shades of it, the small ones are grey, invalid edges dark. The "Roadmap" GUI folder
-picks a node (the robot goes there) and plans from the workbench's current configuration to it, in a
+picks a node (the robot goes there) and asks the planner's Super Graph query (`motion.query`, the motion's
+graph and transit for the robot alone) for a path from the workbench's current configuration to it, in a
 background thread, then animates.
 """
 from __future__ import annotations
@@ -18,8 +19,8 @@ import viser
 
 from planner.core.session import Session
 from planner.model.task import Scene
+from planner.motion.query import QueryResult, RoadmapQuery
 from planner.roadmap.build import wrist_positions
-from planner.roadmap.query import QueryResult, RoadmapPlanner
 from planner.roadmap.result import Roadmap
 
 from ..notify import error_text
@@ -119,14 +120,14 @@ class RoadmapLayer(StepLayer):
         self.roadmap: Roadmap | None = None
         self.last_query: QueryResult | None = None
         self.job: threading.Thread | None = None
-        self._planner: RoadmapPlanner | None = None
+        self._query: RoadmapQuery | None = None
         self._plan_lock = threading.Lock()
         self._animation = 0  # bumped to stop a running animation
 
     # -- drawing ---------------------------------------------------------------------------------
 
     def update(self, result: Roadmap) -> None:
-        self.roadmap, self._planner, self.last_query = result, None, None
+        self.roadmap, self._query, self.last_query = result, None, None
         stats = result.stats()
         if len(result.edges):
             points, colors = wrist_segments(result)
@@ -203,16 +204,12 @@ class RoadmapLayer(StepLayer):
         assert roadmap is not None
         try:
             with self._plan_lock:
-                if self._planner is None:
-                    self._say("*Building the roadmap's collision model…*")
-                    self._planner = RoadmapPlanner(self.scene, roadmap, self.params_of("roadmap"))
-                planner = self._planner
-                held = np.setdiff1d(np.arange(len(q)), planner.dec.transit)
-                moved = not np.allclose(q[held], planner.dec.q_hold[held])
-                q[held] = planner.dec.q_hold[held]
-                self._say(f"*Planning to node {i}…*")
+                if self._query is None:
+                    self._query = RoadmapQuery(self.scene, roadmap, self.params_of("roadmap"))
+                q, moved = self._query.at_rest(q)
+                self._say(f"*Planning to node {i}…* (the first query builds the roadmap's collision model)")
                 t0 = time.monotonic()
-                result = planner.query(q, roadmap.node_q[i])
+                result = self._query.query(q, roadmap.node_q[i])
         except Exception as exc:  # shown, never raised into viser's thread
             self._say(f"<span style='color:#d22'>**Query failed:** {plain(error_text(exc))}</span>")
             return
@@ -221,12 +218,12 @@ class RoadmapLayer(StepLayer):
         if not result.found:
             self._say(f"<span style='color:#d22'>**No path** to node {i}{note}: {plain(result.message)}</span>")
             return
-        self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, {len(result.nodes)} graph nodes, "
-                  f"length {result.length:.2f} rad, {result.checks} checks, {time.monotonic() - t0:.1f} s. *Animating…*")
+        self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, length {result.length:.2f} rad, "
+                  f"{result.checks} checks, {time.monotonic() - t0:.1f} s. *Animating…*")
         self._animate(wb, frames(self.scene.robot, result.path), animation, f"roadmap: path to node {i}")
         if animation == self._animation:
-            self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, {len(result.nodes)} graph nodes, "
-                      f"length {result.length:.2f} rad, {result.checks} checks. Robot at node {i}.")
+            self._say(f"**Path found** to node {i}{note}: {len(result.path)} waypoints, length {result.length:.2f} rad, "
+                      f"{result.checks} checks. Robot at node {i}.")
 
     def _animate(self, wb: Host, qs: np.ndarray, animation: int, label: str) -> None:
         """Pose the robot at each of qs, at most FPS a second (slower when drawing is); stops when another action starts."""
