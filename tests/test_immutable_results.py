@@ -58,3 +58,9 @@ def test_frozen_json_refuses_changes():
     with pytest.raises(ValueError):
         data["c"][0] = 1.0
     assert json.loads(json.dumps(data, default=list)) == {"a": [1, {"b": [2.0]}], "c": [0.0, 0.0]}
+
+
+def test_the_scene_poses_and_configurations_are_read_only(example):
+    scene = example.scene
+    for name in ("object_initial", "object_final", "q_initial", "q_final"):
+        assert not getattr(scene, name).flags.writeable, name
