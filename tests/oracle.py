@@ -11,6 +11,19 @@ from __future__ import annotations
 import fcl
 import numpy as np
 import pinocchio as pin
+import trimesh
+from mesh_depth import ClosedMesh, surface_points
+
+# m: how deep a touching hand's link may be in the object. The motion lets the working hand's links be up to
+# `contact_penetration` (1 mm) deep between its checks (0 at them), and a touching fingertip as deep as its grasp put
+# it, at most the grasp list's `contact_clearance` (1 mm: the fingertip sphere shrunk by it is clear of the object);
+# the palm is put at its grasp to 0.1 mm by the motion's refinement. The oracle's link meshes lie inside the planner's
+# hulls, and its surface points undercut a depth by little, so more than 1.1 mm is a hand in the object.
+CONTACT_DEPTH = 1.1e-3
+# m: how deep a fingertip may pass while its finger closes on the object or lets go of it. The motion does not check
+# the touching fingertips then (they end on the surface by design), so one curling past a bulge of the surface dips
+# under it on the way; a third of the fingertips' radius (12 mm) is let pass, a finger pushed into the object is not.
+SWEEP_DEPTH = 4e-3
 
 
 def _fcl_geometry(geom, scale) -> tuple[fcl.CollisionGeometry, np.ndarray | None]:
@@ -28,6 +41,22 @@ def _fcl_geometry(geom, scale) -> tuple[fcl.CollisionGeometry, np.ndarray | None
     if hasattr(geom, "halfLength"):
         return fcl.Cylinder(geom.radius, 2 * geom.halfLength), None
     return fcl.Sphere(geom.radius), None
+
+
+def _surface(geom, scale) -> tuple[np.ndarray, float]:
+    """Points on a URDF collision shape's surface in its frame, and how far its surface lies beyond them (a sphere: its
+    centre, and its radius)."""
+    if hasattr(geom, "vertices"):
+        tris = np.array([[t[0], t[1], t[2]] for t in (geom.tri_indices(i) for i in range(geom.num_tris))], np.int64)
+        shape = trimesh.Trimesh(np.asarray(geom.vertices()) * np.asarray(scale), tris, process=False)
+    elif hasattr(geom, "halfSide"):
+        shape = trimesh.creation.box(extents=2 * np.asarray(geom.halfSide))
+    elif hasattr(geom, "halfLength"):
+        make = trimesh.creation.capsule if "Capsule" in type(geom).__name__ else trimesh.creation.cylinder
+        shape = make(radius=geom.radius, height=2 * geom.halfLength)
+    else:
+        return np.zeros((1, 3)), float(geom.radius)
+    return surface_points(shape), 0.0
 
 
 def _mesh(mesh) -> fcl.BVHModel:
@@ -72,8 +101,11 @@ class Oracle:
     Bounding spheres screen the pairs; each pair whose spheres overlap is then tested exactly by python-fcl.
     """
 
-    def __init__(self, scene):
+    def __init__(self, scene, depth: float = CONTACT_DEPTH, sweep: float = SWEEP_DEPTH):
+        """`depth`: how deep a link of a hand touching the object may go into it; `sweep`: a fingertip while the
+        fingers close or open."""
         robot = scene.robot
+        self.depth, self.sweep = depth, sweep
         self.robot, self.model = robot, robot.model
         self.data = robot.model.createData()
         self.gm = robot.collision_model
@@ -94,6 +126,9 @@ class Oracle:
             part[g] = next((a for a in robot.spec.arm_names if q in robot.arm_idx[a] or q in robot.hand_idx[a]), "torso")
         self.hand = {a: {g for g in self.moving if self.model.joints[objs[g].parentJoint].idx_q in robot.hand_idx[a]
                          or objs[g].name.startswith(robot.spec.arm(a).hand.prefix)} for a in robot.spec.arm_names}
+        tip_joints = {a: {self.model.frames[self.model.getFrameId(robot.spec.arm(a).hand.prefixed(f.tip_frame))].parentJoint
+                          for f in robot.spec.arm(a).hand.fingers} for a in robot.spec.arm_names}
+        self.tips = {a: {g for g in self.hand[a] if objs[g].parentJoint in tip_joints[a]} for a in robot.spec.arm_names}
         self.env, centres, radii = [], [], []
         for ob in scene.environment:
             geom, verts = _fcl_geometry_of_obstacle(ob)
@@ -104,6 +139,8 @@ class Oracle:
         self.env_centre, self.env_radius = np.array(centres), np.array(radii)
         self.object, verts = _mesh(scene.object_mesh), np.asarray(scene.object_mesh.vertices, float)
         self.object_centre, self.object_radius = _radius(self.object, verts)
+        self.closed, self.object_box = ClosedMesh(scene.object_mesh), (verts.min(axis=0), verts.max(axis=0))
+        self.surface = {g: _surface(objs[g].geometry, objs[g].meshScale) for hand in self.hand.values() for g in hand}
         parents = self.model.parents
         poses = self._poses(robot.q_rest)
         pairs = [(i, j) for i in self.moving for j in range(len(objs)) if (j not in self.moving or i < j) and part[i] != part[j]
@@ -137,12 +174,32 @@ class Oracle:
         return [f"{self.names[i[k]]} with {self.names[j[k]]}" for k in near
                 if hit(self.shapes[i[k]], poses[i[k]], self.shapes[j[k]], poses[j[k]])]
 
-    def _object_hits(self, poses: list[np.ndarray], centres: np.ndarray, object_pose: np.ndarray, excused: set[int]) -> list[str]:
+    def _object_hits(self, poses: list[np.ndarray], centres: np.ndarray, object_pose: np.ndarray,
+                     excused: dict[int, float]) -> list[str]:
+        """Names of the robot links that hit the object, those in `excused` only deeper than the depth it gives them."""
         moving = np.array(self.moving)
         ocentre = object_pose[:3, :3] @ self.object_centre + object_pose[:3, 3]
         near = np.linalg.norm(centres[moving] - ocentre, axis=1) < self.radius[moving] + self.object_radius
-        return [f"{self.names[g]} with the object" for g in moving[near]
-                if g not in excused and hit(self.shapes[g], poses[g], self.object, object_pose)]
+        found = []
+        for g in moving[near]:
+            if hit(self.shapes[g], poses[g], self.object, object_pose):
+                if g not in excused:
+                    found.append(f"{self.names[g]} with the object")
+                elif (d := self.depth_in_object(g, poses[g], object_pose)) > excused[g]:
+                    found.append(f"{self.names[g]} {1e3 * d:.1f} mm into the object")
+        return found
+
+    def depth_in_object(self, g: int, pose: np.ndarray, object_pose: np.ndarray) -> float:
+        """How deep hand geometry g at world `pose` goes into the object at `object_pose` (m; 0 when only its points
+        outside the object's bounding box are found, none of which can be inside)."""
+        points, beyond = self.surface[g]
+        T = np.linalg.solve(object_pose, pose)
+        p = points @ T[:3, :3].T + T[:3, 3]
+        if beyond == 0.0:
+            p = p[np.all((p >= self.object_box[0]) & (p <= self.object_box[1]), axis=1)]
+            if not len(p):
+                return 0.0
+        return beyond + float(self.closed.signed_distances(p).max())
 
     def robot_collisions(self, q: np.ndarray) -> list[str]:
         """Names of the colliding pairs of the robot alone at q (no object): its links against the obstacles and each other."""
@@ -151,7 +208,7 @@ class Oracle:
 
     def object_hits(self, q: np.ndarray, object_pose: np.ndarray) -> list[str]:
         """Names of the robot links that hit the object at q (every link: nothing holds it)."""
-        return self._object_hits(*self._posed(q), object_pose, set())
+        return self._object_hits(*self._posed(q), object_pose, {})
 
     def object_obstacle_hits(self, object_pose: np.ndarray, excused: set[str] = frozenset()) -> list[str]:
         """Names of the obstacles (those in `excused` aside) the object at `object_pose` hits."""
@@ -161,12 +218,15 @@ class Oracle:
                 if self.env[e][0] not in excused and hit(self.object, object_pose, self.env[e][1], self.env[e][2])]
 
     def collisions(self, q: np.ndarray, object_pose: np.ndarray, holder: str | None, active: str | None,
-                   near_support: bool) -> list[str]:
+                   near_support: bool, closing: bool = False) -> list[str]:
         """Names of the colliding pairs at q along a motion (empty when free): the robot with the object at `object_pose`
-        (the `holder`'s and the `active` hand's links excepted) and, while held, the object with the obstacles (its
-        supports excepted when `near_support`)."""
+        (the `holder`'s and the `active` hand's links may touch it, no deeper than `depth`, the active hand's fingertips
+        `sweep` while its fingers move when `closing`) and, while held, the object with the obstacles (its supports
+        excepted when `near_support`)."""
         poses, centres = self._posed(q)
-        excused = (self.hand[holder] if holder else set()) | (self.hand[active] if active else set())
+        excused = {g: self.depth for arm in (holder, active) if arm for g in self.hand[arm]}
+        if closing and active:
+            excused.update(dict.fromkeys(self.tips[active], self.sweep))
         found = self._environment_hits(poses, centres) + self._object_hits(poses, centres, object_pose, excused)
         if holder is not None:
             found += self.object_obstacle_hits(object_pose, self.supports if near_support else set())

@@ -20,6 +20,10 @@ from planner.handover.exchange_grid import PalmWaypoints, exchange_costs
 
 SEED = 3  # as the session tests: the grasp lists come from the shared test cache
 POSITION_TOL, ROTATION_TOL = 2e-3, 2e-2  # the step's IK tolerances
+# m: how deep a holding hand may be in the object at these configurations: its grasp's (the grasp list's
+# contact_clearance, 1 mm) plus how far the IK tolerances move a fingertip (the palm within POSITION_TOL, turned
+# by up to ROTATION_TOL about its frame, the fingertips less than 0.2 m from it); the motion refines the palm onto its grasp
+HELD_DEPTH = 1e-3 + POSITION_TOL + ROTATION_TOL * 0.2
 
 pytestmark = pytest.mark.slow
 
@@ -33,8 +37,9 @@ def planned(tmp_path_factory, default_scene):
 
 @pytest.fixture(scope="module")
 def oracle(default_scene) -> Oracle:
-    """The independent oracle (tests/oracle.py): full URDF meshes through python-fcl, no code shared with the checker."""
-    return Oracle(default_scene)
+    """The independent oracle (tests/oracle.py): full URDF meshes through python-fcl, no code shared with the checker;
+    the holding hands as deep in the object as the IK tolerances let them (HELD_DEPTH)."""
+    return Oracle(default_scene, depth=HELD_DEPTH)
 
 
 def assert_holds(scene, q: np.ndarray, arm: str, grasps, rank: int, object_pose: np.ndarray) -> None:

@@ -7,10 +7,11 @@ meshes, not hulls; the fingers' boxes and spheres) through python-fcl, posed by 
 Every trajectory sample and nine more configurations between consecutive samples (the samples of
 one straight segment are collinear, corners are samples, so these lie on the planned path) are
 checked: robot against the obstacles; robot against the object at the pose the result gives (the
-holding hand, and the hand working at the object during its contact motions, excepted: they touch it
-by design); the object while carried against the obstacles (its support excepted while it is lifted
-or set down); and links of different parts (each arm with its hand, the torso) against each other,
-except pairs the oracle itself finds touching at rest or joined by a joint.
+holding hand, and the hand working at the object during its contact motions, touch it by design: no
+deeper than the motion allows them, their fingertips a little more while the fingers close or open);
+the object while carried against the obstacles (its support excepted while it is lifted or set down);
+and links of different parts (each arm with its hand, the torso) against each other, except pairs the
+oracle itself finds touching at rest or joined by a joint.
 """
 from __future__ import annotations
 
@@ -140,9 +141,11 @@ def test_every_configuration_is_collision_free_by_an_independent_oracle(either):
     for k in range(1, len(m.t)):  # the interval before sample k belongs to sample k's motion
         holder = arms[m.holder[k]] if m.holder[k] >= 0 else None
         active = arms[m.active[k]] if m.active[k] >= 0 else None
+        fingers = session.scene.robot.hand_idx[active] if active else []
+        closing = bool(np.any(m.q[k - 1, fingers] != m.q[k, fingers]))
         for s in np.linspace(0.1, 1.0, 10):
             q = m.q[k - 1] + s * (m.q[k] - m.q[k - 1])
-            found = oracle.collisions(q, _object_between(session, m, k, q), holder, active, k in lifting)
+            found = oracle.collisions(q, _object_between(session, m, k, q), holder, active, k in lifting, closing)
             if found:
                 bad.append((k, round(float(s), 1), found[:3]))
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"

@@ -13,7 +13,7 @@ import errno
 import io
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -81,12 +81,39 @@ def frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+class FrozenDict(dict):
+    """A dict no one can change: a result's JSON object (still a dict to json and isinstance, copied and pickled as one)."""
+
+    def _refuse(self, *args: Any, **kwargs: Any) -> None:
+        raise TypeError(f"{type(self).__name__} is read-only")
+
+    __setitem__ = __delitem__ = __ior__ = clear = pop = popitem = setdefault = update = _refuse
+
+    def __reduce__(self) -> tuple:
+        return type(self), (dict(self),)
+
+
+def frozen_json(value: Any) -> Any:
+    """JSON-like data made immutable all the way down: lists (and tuples) as tuples, dicts as FrozenDicts, arrays read-only."""
+    if isinstance(value, np.ndarray):
+        return frozen(value)
+    if isinstance(value, (list, tuple)):
+        return tuple(frozen_json(v) for v in value)
+    if isinstance(value, Mapping):
+        return FrozenDict((k, frozen_json(v)) for k, v in value.items())
+    return value
+
+
 def read_only(result: R) -> R:
-    """`result` with its array fields made read-only (results are immutable once built, like loaded ones)."""
+    """A copy of `result` whose JSON fields are immutable (see frozen_json), its arrays (the same) made read-only:
+    results are immutable once built, like loaded ones."""
+    rest = {}
     for f in dataclasses.fields(result):
         if _is_array(f):
             getattr(result, f.name).setflags(write=False)
-    return result
+        else:
+            rest[f.name] = frozen_json(getattr(result, f.name))
+    return dataclasses.replace(result, **rest)
 
 
 def save_result(result: Any, folder: Path, stem: str) -> list[str]:
@@ -203,7 +230,7 @@ def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | No
         else:
             if f.name not in rest:
                 raise InputError(json_path, f.name, "missing field")
-            values[f.name] = rest[f.name]
+            values[f.name] = frozen_json(rest[f.name])
     unknown = set(rest) - set(values)
     if unknown:
         raise InputError(json_path, sorted(unknown)[0], f"unknown field (this version of {cls.__name__} does not have it)")

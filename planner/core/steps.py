@@ -57,7 +57,7 @@ class StepOutput:
     stage_seconds: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        read_only(self.result)
+        object.__setattr__(self, "result", read_only(self.result))  # while it is built: the result as it will be shared
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ import trimesh
 
 from planner.core.errors import InputError
 from planner.core.paths import ASSETS, TASKS_DIR, named_file
+from planner.core.results import frozen
 from planner.core.tomlread import Table, load_toml
 from planner.model.environment import SHAPES, Environment, Obstacle
 from planner.model.geometry import pose
@@ -214,10 +215,10 @@ def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None 
         environment=obstacles,
         object_name=mesh_name,
         object_mesh=object_mesh,
-        object_initial=_placement(obj.table("initial")),
-        object_final=_placement(obj.table("final")),
-        q_initial=_configuration(root.table("robot_initial", default={}), robot),
-        q_final=_configuration(root.table("robot_final", default={}), robot),
+        object_initial=frozen(_placement(obj.table("initial"))),
+        object_final=frozen(_placement(obj.table("final"))),
+        q_initial=frozen(_configuration(root.table("robot_initial", default={}), robot)),
+        q_final=frozen(_configuration(root.table("robot_final", default={}), robot)),
         meshes=meshes,
         handover=root.bool("handover", default=False),
     )
