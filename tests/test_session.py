@@ -24,6 +24,17 @@ def _same(a, b) -> bool:
     return json.loads(json.dumps(a)) == json.loads(json.dumps(b))
 
 
+EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
+
+
+@pytest.fixture
+def example(tmp_path) -> Path:
+    """A copy of the committed example session (a finished plan of every step), to open, damage or refuse to overwrite."""
+    import shutil
+
+    return Path(shutil.copytree(EXAMPLE, tmp_path / "example"))
+
+
 @pytest.fixture(scope="module")
 def planned(tmp_path_factory, default_scene):
     """The whole pipeline run once on the default task, with its in-memory results."""
@@ -33,6 +44,7 @@ def planned(tmp_path_factory, default_scene):
     return folder, {name: session.result(name) for name in session.finished()}
 
 
+@pytest.mark.slow
 def test_round_trip_every_step_exactly(planned):
     folder, results = planned
     assert [s.name for s in PIPELINE] == list(results)
@@ -47,13 +59,13 @@ def test_round_trip_every_step_exactly(planned):
     assert [set(r) - {"stage_seconds"} for r in manifest["steps"]] == [keys] * len(PIPELINE)
 
 
-def test_replay_calls_no_planner_step(planned):
+def test_replay_calls_no_planner_step(example):
     """Opening a session in the workbench draws every layer from saved results: no step may run."""
     import socket
 
     from workbench.app import Workbench
 
-    folder, _ = planned
+    folder = example
     originals = [s.run for s in PIPELINE]
 
     def forbidden(ctx):
@@ -75,8 +87,8 @@ def test_replay_calls_no_planner_step(planned):
             object.__setattr__(step, "run", original)
 
 
-def test_existing_session_survives_without_force(planned, default_scene):
-    folder, _ = planned
+def test_existing_session_survives_without_force(example, default_scene):
+    folder = example
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     with pytest.raises(RegraspError, match="already holds a session"):
         Session.create(folder, default_scene, seed=3)
@@ -140,46 +152,36 @@ def _keys(value) -> list[str]:
     return [k for v in value for k in _keys(v)] if isinstance(value, list) else []
 
 
-@pytest.fixture
-def copy_of(planned, tmp_path):
-    import shutil
-
-    folder, _ = planned
-    target = tmp_path / "copy"
-    shutil.copytree(folder, target)
-    return target
-
-
 def _open_error(folder: Path) -> str:
     with pytest.raises(InputError) as info:
         Session.open(folder)
     return str(info.value)
 
 
-def test_missing_npz(copy_of):
-    (copy_of / "arms.npz").unlink()
-    msg = _open_error(copy_of)
-    assert str(copy_of / "arms.npz") in msg and "missing" in msg
+def test_missing_npz(example):
+    (example / "arms.npz").unlink()
+    msg = _open_error(example)
+    assert str(example / "arms.npz") in msg and "missing" in msg
 
 
-def test_truncated_npz(copy_of):
-    data = (copy_of / "arms.npz").read_bytes()
-    (copy_of / "arms.npz").write_bytes(data[: len(data) // 2])
-    msg = _open_error(copy_of)
-    assert str(copy_of / "arms.npz") in msg and "truncated or corrupt" in msg
+def test_truncated_npz(example):
+    data = (example / "arms.npz").read_bytes()
+    (example / "arms.npz").write_bytes(data[: len(data) // 2])
+    msg = _open_error(example)
+    assert str(example / "arms.npz") in msg and "truncated or corrupt" in msg
 
 
-def test_manifest_not_json(copy_of):
-    (copy_of / MANIFEST).write_text("{ not json")
-    msg = _open_error(copy_of)
-    assert str(copy_of / MANIFEST) in msg and "not valid JSON" in msg
+def test_manifest_not_json(example):
+    (example / MANIFEST).write_text("{ not json")
+    msg = _open_error(example)
+    assert str(example / MANIFEST) in msg and "not valid JSON" in msg
 
 
-def test_newer_format_version(copy_of):
-    manifest = json.loads((copy_of / MANIFEST).read_text())
+def test_newer_format_version(example):
+    manifest = json.loads((example / MANIFEST).read_text())
     manifest["format_version"] = 99
-    (copy_of / MANIFEST).write_text(json.dumps(manifest))
-    msg = _open_error(copy_of)
+    (example / MANIFEST).write_text(json.dumps(manifest))
+    msg = _open_error(example)
     assert "format_version" in msg and "newer regrasp" in msg
 
 
@@ -190,36 +192,36 @@ def _rewrite_arms_array(folder: Path, name: str, value: np.ndarray) -> None:
     np.savez(folder / "arms.npz", **arrays)
 
 
-def test_array_of_wrong_shape(copy_of):
-    _rewrite_arms_array(copy_of, "q_pick", np.zeros(7))
-    msg = _open_error(copy_of)
-    assert str(copy_of / "arms.npz") in msg and "q_pick" in msg and "shape" in msg
+def test_array_of_wrong_shape(example):
+    _rewrite_arms_array(example, "q_pick", np.zeros(7))
+    msg = _open_error(example)
+    assert str(example / "arms.npz") in msg and "q_pick" in msg and "shape" in msg
 
 
-def test_array_of_wrong_dtype(copy_of):
-    _rewrite_arms_array(copy_of, "q_place", np.zeros(49, dtype=np.float32))
-    msg = _open_error(copy_of)
+def test_array_of_wrong_dtype(example):
+    _rewrite_arms_array(example, "q_place", np.zeros(49, dtype=np.float32))
+    msg = _open_error(example)
     assert "q_place" in msg and "dtype float64" in msg
 
 
-def test_embedded_task_with_unknown_field(copy_of):
-    manifest = json.loads((copy_of / MANIFEST).read_text())
+def test_embedded_task_with_unknown_field(example):
+    manifest = json.loads((example / MANIFEST).read_text())
     manifest["task"]["colour"] = "red"
-    (copy_of / MANIFEST).write_text(json.dumps(manifest))
-    msg = _open_error(copy_of)
-    assert str(copy_of / MANIFEST) in msg and "task.colour" in msg and "unknown field" in msg
+    (example / MANIFEST).write_text(json.dumps(manifest))
+    msg = _open_error(example)
+    assert str(example / MANIFEST) in msg and "task.colour" in msg and "unknown field" in msg
 
 
-def test_unknown_step_in_manifest(copy_of):
-    manifest = json.loads((copy_of / MANIFEST).read_text())
+def test_unknown_step_in_manifest(example):
+    manifest = json.loads((example / MANIFEST).read_text())
     manifest["steps"][0]["name"] = "teleport"
-    (copy_of / MANIFEST).write_text(json.dumps(manifest))
-    msg = _open_error(copy_of)
+    (example / MANIFEST).write_text(json.dumps(manifest))
+    msg = _open_error(example)
     assert "steps[0].name" in msg and "teleport" in msg
 
 
-def test_branch_keeps_the_original(planned, tmp_path):
-    folder, results = planned
+def test_branch_keeps_the_original(example, tmp_path):
+    folder = example
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     session = Session.open(folder)
     new = session.branch(tmp_path / "branch", before=PIPELINE[0].name)
