@@ -50,7 +50,7 @@ class TransitStage:
             raise ValueError("transit ends must agree on every joint outside the ones it moves")
         part = "transit" if arm is None else "arm away"
         full, near = self.validities.of(situation, q_start, idx).transit_validities(q_start, q_goal)
-        checkers = {id(v.seg): v.seg for v in (full, near)}.values()  # one when no pair is fitted
+        checkers = [full.seg] if near.seg is full.seg else [full.seg, near.seg]  # one when no pair is fitted
         before = sum(c.checks for c in checkers)
         try:
             return self._transit(part, q_start, q_goal, situation, space, full, near, arm)
