@@ -174,17 +174,18 @@ def test_vertex_shortcuts_jump_to_the_farthest_reachable_vertex_and_check_each_k
 
 
 def _phase_planner(scene, roadmap, baseline: bool = False):
-    """The phase planner of a scene on the roadmap, with the default parameters and seed 0."""
+    """The planner of a double grasp on a scene and the roadmap, with the default parameters and seed 0."""
     from planner.collision.checker import build_collision_model
     from planner.collision.validity import transit_profile
+    from planner.motion.double_grasp import DoubleGraspPlanner
     from planner.motion.graph import MotionGraph
-    from planner.motion.phases import PhasePlanner
     from planner.motion.step import contact_profile
+    from planner.motion.validities import Validities
 
     p = MotionParams()
-    return PhasePlanner(scene, build_collision_model(scene.robot, scene.environment), MotionGraph(roadmap),
-                        transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p), p,
-                        np.random.default_rng(0), baseline)
+    validities = Validities(scene, build_collision_model(scene.robot, scene.environment),
+                            transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p))
+    return DoubleGraspPlanner(scene, validities, MotionGraph(roadmap), p, np.random.default_rng(0), baseline)
 
 
 @pytest.fixture(scope="module")
@@ -463,15 +464,15 @@ def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
         return data.oMf[robot.frame_id(frame)].translation.copy()
 
     q = dg.q_place[0]
-    opened = _phase_planner(scene, roadmap).opened(b, p.release, True)
+    opened = _phase_planner(scene, roadmap).hand.opened(b, p.release, True)
     reached = q.copy()
     reached[robot.hand_idx[b.arm]] = opened
     block = np.eye(4)
     block[:3, 3] = tip(reached)
     blocked = dataclasses.replace(scene, environment=scene.environment + (Obstacle("block", "box", (0.015, 0.015, 0.015), block),))
     planner = _phase_planner(blocked, roadmap)
-    situation = Situation(None, scene.object_final, fingertip_geometries(planner.cm, b.arm, b.touching))
-    values = planner.letting_go(b, q, situation)
+    situation = Situation(None, scene.object_final, fingertip_geometries(planner.validities.cm, b.arm, b.touching))
+    values = planner.contact.letting_go(b, q, situation)
     hand = robot.hand_idx[b.arm]
     at = np.isin(hand, idx)
     assert not np.allclose(values[at], opened[at]), "the blocked finger opened into the block"
@@ -488,6 +489,8 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     """The ways a hand's fingers close: all joints at once first; among the others, one moving every finger's joints one
     depth at a time from the tip to the base and one from the base to the tip (a finger curling onto a rounded surface
     hooks its tip first); every way starts at q and ends at the target, and no two are the same."""
+    from planner.motion.validities import Checked
+
     scene, roadmap, _ = example
     robot = scene.robot
     planner = _phase_planner(scene, roadmap)
@@ -495,7 +498,7 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     hand, fingers = robot.hand_idx[arm], list(robot.finger_idx[arm].values())
     q = robot.q_rest.copy()
     target = robot.lower[hand] + 0.5 * (robot.upper[hand] - robot.lower[hand])
-    paths = planner.finger_motions(q, arm, target)
+    paths = planner.hand.motions(q, arm, target)
     assert len(paths[0]) == 2, "the first way is not all joints at once"
     for path in paths:
         assert np.allclose(path[0], q) and np.allclose(path[-1, hand], target)
@@ -513,7 +516,7 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     orders = [moved_depths(path) for path in paths]
     assert [{d} for d in range(depth)] in orders, "no way closes one joint depth at a time from the tip"
     assert [{d} for d in reversed(range(depth))] in orders, "no way closes one joint depth at a time from the base"
-    assert planner.finger_motions(q, arm, q[hand]) == [], "fingers already there moved"
+    assert planner.hand.motions(q, arm, q[hand]) == [], "fingers already there moved"
 
     # a hand where one finger must close from the tip to the base while another must close all at once: no hand-wide
     # order fits both, the fingers one after the other do
@@ -537,7 +540,7 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
                      if not np.isclose(path[0, j], path[-1, j])]
             return order == sorted(order, reverse=True)
 
-    found = planner.finger_path(q, arm, target, Rule())
+    found = planner.hand.path(q, arm, target, Checked(Rule()))
     assert found is not None and Rule().follows(found), "no valid way found finger by finger"
     assert np.allclose(found[0], q) and np.allclose(found[-1, hand], target)
 
@@ -637,6 +640,7 @@ def test_transit_checks_count_every_collision_check_of_the_transit(example, monk
     from planner.collision.checker import CollisionChecker
     from planner.collision.situation import Situation
     from planner.core.session import Session
+    from planner.motion.phase import Phase
     from planner.motion.result import PHASES
 
     scene, roadmap, _ = example
@@ -650,8 +654,8 @@ def test_transit_checks_count_every_collision_check_of_the_transit(example, monk
     calls = []
     check = CollisionChecker.in_collision
     monkeypatch.setattr(CollisionChecker, "in_collision", lambda self, *a, **k: calls.append(1) or check(self, *a, **k))
-    planner.transit(3, start, goal, Situation(None, scene.object_final))
-    assert planner.stats[3].checks == len(calls) > 2, (planner.stats[3].checks, len(calls))
+    planner.stage(Phase.REST).transit(start, goal, Situation(None, scene.object_final))
+    assert planner.stats[Phase.REST].checks == len(calls) > 2, (planner.stats[Phase.REST].checks, len(calls))
 
 
 def test_the_carry_transit_can_use_the_roadmap_nodes(example):
@@ -672,10 +676,9 @@ def test_the_carry_transit_can_use_the_roadmap_nodes(example):
     q_start, q_goal = motion.q[run[0]], motion.q[run[-1]]
     arm = motion.arms[int(motion.holder[run[0]])]
     planner = _phase_planner(scene, roadmap)
-    hold = np.linalg.inv(motion.object_pose[run[0]]) @ planner.palm(q_start, arm)
-    model = planner.model(Situation(arm, hold), q_start, planner.transit_idx)
-    full, _ = planner.transit_validities(model, q_start, q_goal)
-    space = JointSpace.of(robot.lower, robot.upper, planner.transit_idx, q_start)
+    hold = np.linalg.inv(motion.object_pose[run[0]]) @ planner.arms.palm(q_start, arm)
+    full, _ = planner.validities.of(Situation(arm, hold), q_start, planner.contact.transit_idx).transit_validities(q_start, q_goal)
+    space = JointSpace.of(robot.lower, robot.upper, planner.contact.transit_idx, q_start)
     nearest = np.argsort(space.distance(roadmap.node_q, q_start), kind="stable")[:48]
     valid = sum(full.on("changed").state_valid(space.full(space.reduce(roadmap.node_q[n]))) for n in nearest)
     assert valid >= 12, f"only {valid} of the 48 roadmap nodes nearest the Carry start are valid while it holds the object"
@@ -697,25 +700,26 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
     motion = Session.open(EXAMPLE).result("motion")
     q = motion.q[np.flatnonzero(motion.phase == PHASES.index("Carry"))[0]]
     planner = _phase_planner(scene, roadmap)
-    idx = planner.transit_idx
+    idx = planner.contact.transit_idx
 
     def lowered(dz):
         pose = scene.object_initial.copy()
         pose[2, 3] -= dz
         situation = Situation(None, pose)
-        model = planner.model(situation, q, idx)
+        checks = planner.validities.of(situation, q, idx)
+        model = checks.model
         obj = [o.name for o in model.geometry.geometryObjects].index(OBJECT)
-        gaps = [d for k, d in planner.clearances(model, q).items() if obj in model.ends[k]]
-        return situation, model, min(gaps, default=np.inf)
+        gaps = [d for k, d in checks.clearances(q).items() if obj in model.ends[k]]
+        return situation, checks, min(gaps, default=np.inf)
 
     low, high = 0.0, 0.05
     for _ in range(14):  # the drop that leaves 3 mm
         low, high = ((low + high) / 2, high) if lowered((low + high) / 2)[2] < 0.003 else (low, (low + high) / 2)
-    situation, model, gap = lowered(high)
+    situation, checks, gap = lowered(high)
     assert 0.0025 < gap < 0.0035, gap
     goal = q.copy()
     goal[idx] = scene.q_initial[idx]
-    full, near = planner.transit_validities(model, q, goal)
+    full, near = checks.transit_validities(q, goal)
     graded = Graded(full, near)
     with pytest.raises(ValueError, match="coarse paddings must be at least"):
         Graded(near, full)
@@ -759,9 +763,9 @@ def test_the_hull_screen_changes_no_answer(example):
     carry = np.flatnonzero(motion.phase == PHASES.index("Carry"))
     arm = robot.spec.arm_names[motion.holder[carry[0]]]
     planner = _phase_planner(scene, roadmap)
-    situation = Situation(arm, np.linalg.inv(motion.object_pose[carry[0]]) @ planner.palm(motion.q[carry[0]], arm))
+    situation = Situation(arm, np.linalg.inv(motion.object_pose[carry[0]]) @ planner.arms.palm(motion.q[carry[0]], arm))
     cm = build_collision_model(robot, scene.environment)
-    idx = planner.transit_idx
+    idx = planner.contact.transit_idx
     profile = transit_profile(roadmap.resolution, 0.02, 0.008)
     hull: coal.CollisionGeometry = coal_convex(scene.object_mesh.convex_hull)
     mesh = coal_mesh(scene.object_mesh)

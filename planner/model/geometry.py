@@ -4,9 +4,6 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-# planner/motion/phases.py imports these three from here until its collision calls move to planner/collision
-from planner.collision.shapes import coal_convex, coal_mesh, transform3s  # noqa: F401
-
 
 def pose(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
     """4x4 homogeneous transform from a translation and roll-pitch-yaw angles."""

@@ -7,8 +7,9 @@ import numpy as np
 
 from planner.core.bounds import bounded
 from planner.core.results import array
+from planner.motion.phase import Phase
 
-PHASES = ("Grasp", "Carry", "Place", "Rest")
+PHASES = tuple(phase.title for phase in Phase)  # Table I's rows, in the order of the stored phase integers
 PLANNERS = ("roadmap", "rrt")
 PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "contact")  # the step's stage seconds per phase,
 # in this order, then one for timing and sampling

@@ -1,6 +1,6 @@
 """The motion step (paper V-B): the whole task as one trajectory, the double grasps tried best first.
 
-Each double grasp is planned phase by phase (phases.py); the first whose every piece is valid is
+Each double grasp is planned by its stages (double_grasp.py); the first whose every piece is valid is
 timed (timing.py) and sampled at a fixed rate. Measurements (seconds per phase and part) go to the
 step's session record, never into the result, so the result depends on the inputs and the seed only.
 """
@@ -20,10 +20,12 @@ from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progr
 from planner.grasping.grasp_list import GraspList
 from planner.handover.double_grasps import DoubleGrasps
 from planner.model.task import Scene
+from planner.motion.double_grasp import DoubleGraspPlanner
 from planner.motion.graph import MotionGraph
-from planner.motion.phases import HandGrasp, PhasePlanner, Piece, PieceFailed
+from planner.motion.piece import HandGrasp, Piece, PieceFailed
 from planner.motion.result import PHASES, Motion, MotionParams
 from planner.motion.timing import sample_polyline
+from planner.motion.validities import Validities
 from planner.roadmap.result import Roadmap
 
 
@@ -75,7 +77,7 @@ def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGras
     count = min(len(dg), p.max_double_grasps)
     for k in range(count):
         progress(k / max(count, 1), f"double grasp {k + 1} of {count}")
-        planner = PhasePlanner(scene, cm, graph, transit, contact, p, rng, baseline=p.planner == "rrt")
+        planner = DoubleGraspPlanner(scene, Validities(scene, cm, transit, contact), graph, p, rng, baseline=p.planner == "rrt")
         try:
             pieces = planner.plan(dg.q_grasp[k], dg.q_exch[k], dg.q_place[k], hand_grasp(pick, int(dg.pick_rank[k])),
                                   hand_grasp(place, int(dg.place_rank[k])))
@@ -107,7 +109,7 @@ def _empty(p: MotionParams, robot, tried: list, resolution: dict, failure: str) 
                   np.zeros(5, np.int64))
 
 
-def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, resolution: dict, planner: PhasePlanner) -> Motion:
+def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, resolution: dict, planner: DoubleGraspPlanner) -> Motion:
     """Time every piece, sample it, and pose the object and wrists at every sample."""
     robot = scene.robot
     arms = list(robot.spec.arm_names)
@@ -128,7 +130,7 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
             poses.append(s.object_pose(palm)[None])
             wrists.append([data.oMf[m].translation.copy() for m in mounts])
         qs.append(q)
-        phase += [piece.phase] * len(q)
+        phase += [int(piece.phase)] * len(q)  # stored as the phase's integer
         holder += [arms.index(s.holder) if s.holder else -1] * len(q)
         active += [arms.index(piece.hand) if piece.hand else -1] * len(q)
         ends.append(sum(len(x) for x in qs) - 1)

@@ -1,0 +1,211 @@
+"""The motion of one double grasp, composed of stages the way a task constructor composes a task (paper V-B).
+
+Grasp: transit to the pre-grasp (the picking hand backed off along its approach direction and raised,
+fingers open), the fingers to their pre-shape, a straight approach, the fingers closing. Carry: the
+object lifted off its support, transit to the exchange with the placing hand at its pre-grasp, its
+approach and closing, then the picking hand letting go (its touching fingers open part way) and
+retreating. Place: the picking arm alone away from the object (to where it is at the placement or at
+the end), transit with the placing hand to near the placement, set down, let go, retreat. Rest:
+transit to the final configuration, where both hands open fully (opened near the object, fingers
+that wrapped around it would hit it).
+
+The contact stages (contact.py) generate the states the transits connect, each candidate loop
+(fallbacks.py) offering the next pre-grasp, pre-shape, lift or set-down where a piece fails. Every
+contact motion is made, and every transit end checked ready, before any transit is searched: a double
+grasp that cannot work is given up in a fraction of a second. Then the transit stages (transit_stage.py)
+run at once (runner.py); where a transit fails, the next candidate end of that hand is tried.
+"""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from planner.collision.situation import Situation, fingertip_geometries
+from planner.model.task import Scene
+from planner.motion.arm_motion import ArmMotions
+from planner.motion.contact import ContactStages
+from planner.motion.fallbacks import freest, options, raise_first, retreats
+from planner.motion.fingers import Fingers
+from planner.motion.graph import MotionGraph
+from planner.motion.phase import Phase
+from planner.motion.piece import HandGrasp, Piece, PieceFailed
+from planner.motion.result import MotionParams
+from planner.motion.runner import Job, run_transits
+from planner.motion.space import JointSpace
+from planner.motion.transit import TransitStats
+from planner.motion.transit_stage import TransitStage
+from planner.motion.validities import Validities
+
+GRASP, CARRY, PLACE, REST = Phase
+
+
+class DoubleGraspPlanner:
+    """Builds the pieces of one double grasp from its stages; keeps per-phase Table I figures in `stats`."""
+
+    def __init__(self, scene: Scene, validities: Validities, graph: MotionGraph, params: MotionParams,
+                 rng: np.random.Generator, baseline: bool):
+        self.scene, self.validities, self.graph, self.p, self.rng, self.baseline = scene, validities, graph, params, rng, baseline
+        self.stats = [TransitStats() for _ in Phase]
+        self.arms = ArmMotions(scene.robot, validities.data, params, self.stats)
+        self.hand = Fingers(validities.cm)
+        self.contact = ContactStages(scene, validities, self.arms, self.hand, params, self.stats)
+
+    def stage(self, phase: Phase, graph: MotionGraph | None = None, rng: np.random.Generator | None = None,
+              stats: TransitStats | None = None) -> TransitStage:
+        """A transit stage of the phase: on the plan's graph, random stream and figures, unless given its own."""
+        return TransitStage(phase, self.validities, self.graph if graph is None else graph, self.rng if rng is None else rng,
+                            self.stats[phase] if stats is None else stats, self.p, self.baseline)
+
+    def transits(self, jobs: list[Job]) -> list[list[Piece] | PieceFailed]:
+        """The jobs' pieces (or failures), run at once (see runner.py)."""
+        robot = self.scene.robot
+        weights = None if self.baseline else JointSpace.of(robot.lower, robot.upper, self.contact.transit_idx, self.hand.open)
+        return run_transits(jobs, self.stage, self.graph, self.rng, self.stats, weights)
+
+    def away_targets(self, q: np.ndarray, arm: str, q_place: np.ndarray, situation: Situation) -> list[np.ndarray]:
+        """Where the picking arm alone may go from its retreat, in order (see TransitStage.away): q with that arm as it
+        is at the placement, else as it is at the end; those a transit can end at."""
+        idx = self.scene.robot.arm_idx[arm]
+        out = []
+        for there in (q_place, self.scene.q_final):
+            target = q.copy()
+            target[idx] = there[idx]
+            try:
+                self.contact.ready(target, situation, PLACE, "arm away")
+            except PieceFailed:
+                continue
+            out.append(target)
+        return out
+
+    def plan(self, q_grasp: np.ndarray, q_exch: np.ndarray, q_place: np.ndarray, a: HandGrasp, b: HandGrasp) -> list[Piece]:
+        """Every piece from q_initial to q_final through the double grasp (a: the picking hand, b: the placing hand; the
+        same hand and grasp for a direct transfer, whose Carry takes the object to above its placement).
+
+        The contact motions come first and every transit's ends are checked ready: a double grasp that cannot work
+        fails in a fraction of a second, before any transit is searched. Where a transit fails, the next pre-grasp
+        candidate of that hand is tried."""
+        scene, c, arms, hand, cm = self.scene, self.contact, self.arms, self.hand, self.validities.cm
+        oi, of = scene.object_initial, scene.object_final
+        open_a, open_b = (hand.open[scene.robot.hand_idx[h.arm]] for h in (a, b))
+
+        # exact grasps, so the object's pose is continuous where it changes hands: each hand holds it as its grasp and place
+        # configurations do (within their IK tolerance of the listed grasp), and the exchange, in the air where both
+        # arms have room, is refined to join them (a placement at the edge of the workspace, the torso at its limits,
+        # cannot move its palm by the millimetres); a direct transfer: one hand holds it from the grasp to the placement
+        direct = a.arm == b.arm
+        g_a = np.linalg.inv(oi) @ arms.palm(q_grasp, a.arm)
+        if direct:
+            g_b = g_a
+            q_place = arms.refine(q_place, b.arm, of @ g_b, None, PLACE, "place")
+        else:
+            g_b = np.linalg.inv(of) @ arms.palm(q_place, b.arm)
+            x = arms.palm(q_exch, a.arm) @ np.linalg.inv(g_a)
+            q_exch = arms.refine(q_exch, b.arm, x @ g_b, a.arm, CARRY, "exchange")
+        static_i, static_f = Situation(None, oi), Situation(None, of)
+        held_a, held_b = Situation(a.arm, g_a), Situation(b.arm, g_b)
+        tips_a, tips_b = fingertip_geometries(cm, a.arm, a.touching), fingertip_geometries(cm, b.arm, b.touching)
+        support_i, support_f = c.supports(oi), c.supports(of)
+        closing_a, closing_b = Situation(None, oi, tips_a), Situation(a.arm, g_a, tips_b)
+
+        # Grasp: (pre-grasp, pre-shape + approach + closing) candidates
+        def grasp(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
+            pre_a, approach = shaped[0], shaped[1][::-1]
+            q_pre = hand.set(approach[0], a.arm, open_a)
+            out = [c.contact(GRASP, "approach", approach, static_i, a.arm)]
+            out = c.fingers(GRASP, "pre-shape", q_pre, a.arm, pre_a, static_i) + out
+            out += c.fingers(GRASP, "closing", approach[-1], a.arm, a.fingers, closing_a)
+            c.ready(q_pre, static_i, GRASP, "pre-grasp")
+            return q_pre, out
+
+        approaches = c.shaped(a, retreats(arms, q_grasp, a.arm, None, True, GRASP, "pre-grasp"), static_i, closing_a)
+        grasps = options(GRASP, "pre-grasp", approaches, grasp)
+        first_grasp = next(grasps)
+
+        # Carry: the lift, (exchange pre-grasp, its approach and closing) candidates, the picking hand letting go and retreating
+        def lift_off(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
+            lift = arms.straight(hand.set(q_grasp, a.arm, a.fingers), a.arm, offset, None, CARRY, "lift")
+            piece = c.contact(CARRY, "lift", lift, Situation(a.arm, g_a, (), support_i), a.arm)
+            return lift[-1], [piece], c.ready(lift[-1], held_a, CARRY, "lift")
+
+        q_lifted, lifted, _ = next(freest(options(CARRY, "lift", iter(c.lifts(oi, q_grasp, a.arm, CARRY)), lift_off)))
+        q_x = hand.set(q_exch, a.arm, a.fingers)
+
+        def exchange(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
+            pre_b, approach_b = shaped[0], shaped[1][::-1]
+            q_pre_b = hand.set(approach_b[0], b.arm, open_b)
+            out = [c.contact(CARRY, "approach", approach_b, held_a, b.arm)]
+            out = c.fingers(CARRY, "pre-shape", q_pre_b, b.arm, pre_b, held_a) + out
+            out += c.fingers(CARRY, "closing", approach_b[-1], b.arm, b.fingers, closing_b)
+            c.ready(q_pre_b, held_a, CARRY, "exchange pre-grasp")
+            return q_pre_b, out
+
+        def leave(situation: Situation, after: Situation, phase: Phase, arm: str):
+            def build(retreat: np.ndarray) -> list[Piece]:
+                piece = c.contact(phase, "retreat", retreat, situation, arm)
+                c.ready(retreat[-1], after, phase, "retreat")
+                return [piece]
+            return build
+
+        if not direct:  # the placing hand's exchange pre-grasp, approach and closing; the picking hand letting go
+            backoffs = retreats(arms, q_x, b.arm, a.arm, False, CARRY, "exchange pre-grasp")
+            exchanges = options(CARRY, "exchange pre-grasp", c.shaped(b, backoffs, held_a, closing_b), exchange)
+            first_exchange = next(exchanges)
+            released = Situation(b.arm, g_b, tips_a)
+            q_both = hand.set(q_x, b.arm, b.fingers)
+            let_a = c.letting_go(a, q_both, released)
+            let_go_a = c.fingers(CARRY, "opening", q_both, a.arm, let_a, released)
+
+            q_let = hand.set(q_both, a.arm, let_a)
+            backing = itertools.chain(*retreats(arms, q_let, a.arm, b.arm, False, CARRY, "retreat", leaving=True))
+            retreat_a = next(options(CARRY, "retreat", backing, leave(released, held_b, CARRY, a.arm)))
+
+        # Place: (above the placement, set-down) candidates; the picking hand keeps its fingers as they let go until the
+        # end (opened near the object, they hit it); in a direct transfer it is the hand that holds the object
+        q_down = q_place if direct else hand.set(q_place, a.arm, let_a)
+
+        def set_down(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
+            lower = arms.straight(q_down, b.arm, offset, None, PLACE, "above the placement")[::-1]
+            piece = c.contact(PLACE, "set-down", lower, Situation(b.arm, g_b, (), support_f), b.arm)
+            return lower[0], [piece], c.ready(lower[0], held_b, PLACE, "above the placement")
+
+        downs = freest(options(PLACE, "set-down", iter(c.lifts(of, q_place, b.arm, PLACE)), set_down))
+        first_down = next(downs)
+        let_go = Situation(None, of, tips_b)
+        let_b = c.letting_go(b, q_down, let_go)
+        let_go_b = c.fingers(PLACE, "opening", q_down, b.arm, let_b, let_go)
+        q_let_b = hand.set(q_down, b.arm, let_b)
+        retreat_b = next(options(PLACE, "retreat", itertools.chain(*retreats(arms, q_let_b, b.arm, None, True, PLACE, "retreat")),
+                                 leave(let_go, static_f, PLACE, b.arm)))
+
+        # Rest: to the final configuration, then both hands open
+        q_end = hand.set(scene.q_final if direct else hand.set(scene.q_final, a.arm, let_a), b.arm, let_b)
+        c.ready(q_end, static_f, REST, "final configuration")
+        opening = [] if np.allclose(q_end, scene.q_final) else [
+            c.contact(REST, "opening", np.stack([q_end, scene.q_final]), static_f, None)]
+
+        # the transits: independent of each other now that every contact motion is made; run longest first as measured
+        # (Carry's, Place's, Rest's, Grasp's, the arm away), so the last to finish is a short one
+        to_grasp: Job = (GRASP, lambda s: s.reach(scene.q_initial, grasps, first_grasp, static_i))
+        to_rest: Job = (REST, lambda s: [s.transit(retreat_b[-1].path[-1], q_end, static_f)])
+        if direct:  # carried by the one hand from the lift to above the placement
+            carry, rest, to_grasp = self.transits([(CARRY, lambda s: s.reach(q_lifted, downs, first_down, held_a)), to_rest,
+                                                   to_grasp])
+            raise_first([to_grasp, carry, rest])
+            return to_grasp + lifted + carry + let_go_b + retreat_b + rest + opening
+        # the picking arm alone away from the object, then the Place transit from where it went: both at once, the second
+        # assuming the first reaches its first target; when it does not, the other targets are tried after them
+        q_retreat = retreat_a[-1].path[-1]
+        targets = self.away_targets(q_retreat, a.arm, q_place, held_b)
+        start = targets[0] if targets else q_retreat
+        carry, to_place, rest, to_grasp, away = self.transits([
+            (CARRY, lambda s: s.reach(q_lifted, exchanges, first_exchange, held_a)),
+            (PLACE, lambda s: s.reach(start, downs, first_down, held_b)), to_rest, to_grasp,
+            (PLACE, lambda s: s.away(q_retreat, a.arm, targets[:1], held_b))])
+        raise_first([to_grasp, carry])
+        if targets and not away:
+            place = self.stage(PLACE)
+            away = place.away(q_retreat, a.arm, targets[1:], held_b)
+            to_place = place.reach((away or retreat_a)[-1].path[-1], downs, first_down, held_b)
+        raise_first([to_place, rest])
+        return to_grasp + lifted + carry + let_go_a + retreat_a + away + to_place + let_go_b + retreat_b + rest + opening

@@ -1,0 +1,110 @@
+"""The transit stage of one phase: torso and arms between two states the contact stages made, by the Super Graph
+(transit.py; RRTConnect alone for the baseline), then shortcut.
+
+A stage has its own random stream, graph and figures: the transits of the phases run at once, each in its own
+stage (see runner.py), so a result does not depend on how many run together.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Iterator
+
+import numpy as np
+
+from planner.collision.situation import Situation
+from planner.collision.validity import Graded, Validity
+from planner.model.robot import Robot
+from planner.motion.graph import MotionGraph
+from planner.motion.phase import Phase
+from planner.motion.piece import Piece, PieceFailed, pairs_text
+from planner.motion.result import MotionParams
+from planner.motion.space import JointSpace
+from planner.motion.transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut, shortcut_vertices
+from planner.motion.validities import Validities
+
+
+def transit_joints(robot: Robot) -> np.ndarray:
+    """The configuration indices a transit moves: the torso and every arm (the hands stay as they are)."""
+    return np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
+
+
+class TransitStage:
+    """Transits of one phase on `graph` (its own copy, or the plan's), drawing from `rng`, counting into `stats`."""
+
+    def __init__(self, phase: Phase, validities: Validities, graph: MotionGraph, rng: np.random.Generator, stats: TransitStats,
+                 params: MotionParams, baseline: bool):
+        self.phase, self.validities, self.graph, self.rng, self.stats = phase, validities, graph, rng, stats
+        self.p, self.baseline = params, baseline
+        self.transit_params = TransitParams.of(params)
+        self.robot = validities.robot
+        self.transit_idx = transit_joints(self.robot)
+
+    def transit(self, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, arm: str | None = None) -> Piece:
+        """Torso and arms from q_start to q_goal (hands as at q_start), by the Super Graph (or RRTConnect: baseline);
+        with `arm`, that arm alone, by RRTConnect (the graph's nodes are whole configurations), `part` 'arm away'."""
+        robot = self.robot
+        idx = self.transit_idx if arm is None else robot.arm_idx[arm]
+        space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
+        if not space.holds(q_goal):
+            raise ValueError("transit ends must agree on every joint outside the ones it moves")
+        part = "transit" if arm is None else "arm away"
+        full, near = self.validities.of(situation, q_start, idx).transit_validities(q_start, q_goal)
+        checkers = [full.seg] if near.seg is full.seg else [full.seg, near.seg]  # one when no pair is fitted
+        before = sum(c.checks for c in checkers)
+        try:
+            return self._transit(part, q_start, q_goal, situation, space, full, near, arm)
+        finally:
+            self.stats.checks += sum(c.checks for c in checkers) - before
+
+    def _transit(self, part: str, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, space: JointSpace,
+                 full: Validity, near: Validity, arm: str | None) -> Piece:
+        """The transit's path, its ends checked first (see transit); what touches an end is checked `near` where it
+        fails `full` (see Graded)."""
+        phase, stats, tp = self.phase, self.stats, self.transit_params
+        for name, q in (("start", q_start), ("goal", q_goal)):
+            if not near.state_valid(q):
+                raise PieceFailed(phase, part, f"its {name} configuration collides ({pairs_text(near.first_collision(q[None]))})")
+        if near.seg is not full.seg:  # dense only beside what the ends hold close
+            near = Graded(full, near)
+        try:
+            if arm is not None:
+                path = rrt_transit(space, full, near, q_start, q_goal, dataclasses.replace(tp, rrt_motions=tp.reconnect_motions),
+                                   self.rng, stats)
+            elif self.baseline:
+                path = rrt_transit(space, full, near, q_start, q_goal, tp, self.rng, stats)
+            else:  # a phase's queries share its RRT budget: once spent, they search the graph only
+                left = max(0, self.p.phase_reconnections - stats.rrt_calls)
+                params = dataclasses.replace(tp, max_reconnections=min(left, tp.max_reconnections))
+                path = LazyTransit(self.graph, space, full.on("changed"), full, near, params, self.rng, stats).query(q_start, q_goal)
+        except TransitFailed as exc:
+            raise PieceFailed(phase, part, str(exc)) from exc
+        t = time.perf_counter()
+        gain = tp.shortcut_min_gain
+        path = shortcut(shortcut_vertices(path, full, near, gain), full, near, self.rng, tp.shortcut_attempts, gain)
+        stats.seconds_shortcut += time.perf_counter() - t
+        return Piece(phase, part, path, situation)
+
+    def reach(self, q_start: np.ndarray, options: Iterator, option: tuple, situation: Situation) -> list[Piece]:
+        """A transit from q_start to the first option ((where the transit ends, pieces from there, ...), in order) it
+        can reach, then its pieces: the next candidate end is tried where a transit fails."""
+        while True:
+            q_to, after = option[:2]
+            try:
+                return [self.transit(q_start, q_to, situation)] + after
+            except PieceFailed as failed:
+                try:
+                    option = next(options)
+                except (PieceFailed, StopIteration):
+                    raise failed from None
+
+    def away(self, q: np.ndarray, arm: str, targets: list[np.ndarray], situation: Situation) -> list[Piece]:
+        """The picking arm alone from its retreat to the first of `targets` it reaches (so the object, held by the
+        other hand, is free of it before the Place transit begins, and that transit starts where the graph is valid);
+        nothing when no motion is found quickly (the Place transit moves both arms)."""
+        for target in targets:
+            try:
+                return [self.transit(q, target, situation, arm)]
+            except PieceFailed:
+                continue
+        return []
