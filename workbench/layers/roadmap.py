@@ -16,6 +16,7 @@ import time
 import numpy as np
 import viser
 
+from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.model.task import Scene
 from planner.roadmap.build import wrist_positions
@@ -23,7 +24,6 @@ from planner.roadmap.query import QueryResult, RoadmapPlanner
 from planner.roadmap.result import Roadmap
 
 from ..notify import error_text
-from ..text import plain
 from .arms import ARM_COLORS
 from .base import Host, Pose, StepLayer
 
