@@ -21,6 +21,7 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import ctypes
+import dataclasses
 import multiprocessing
 import os
 import signal
@@ -35,8 +36,19 @@ PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None  # in a forked_map worker only: its jobs (set by its initializer)
 _BUDGET: int | None = None  # CPUs this process may use (cpu_budget); None: every CPU it is allowed to run on
-# live pools: the thread that made each and its worker processes (recorded once forked, under _SPAWN_LOCK)
-_LIVE: dict[concurrent.futures.ProcessPoolExecutor, tuple[threading.Thread, list[multiprocessing.process.BaseProcess]]] = {}
+
+
+@dataclasses.dataclass
+class _Live:
+    """A live pool's thread, its worker processes (recorded once forked, under _SPAWN_LOCK) and the lock its shutdowns
+    take: CPython's `shutdown(wait=True)` run in two threads at once closes the pool's result queue twice."""
+
+    owner: threading.Thread
+    workers: list[multiprocessing.process.BaseProcess] = dataclasses.field(default_factory=list)
+    closing: threading.Lock = dataclasses.field(default_factory=threading.Lock)
+
+
+_LIVE: dict[concurrent.futures.ProcessPoolExecutor, _Live] = {}  # live pools
 _STOPPED: weakref.WeakSet[threading.Thread] = weakref.WeakSet()  # threads stop_pools was called for: no new pool
 _LIVE_LOCK = threading.Lock()  # guards _LIVE and _STOPPED
 _SPAWN_LOCK = threading.Lock()  # held while a pool forks its workers
@@ -159,18 +171,17 @@ def _fork_workers(pool: concurrent.futures.ProcessPoolExecutor, into: list[multi
         into.extend(p for p in multiprocessing.active_children() if p not in before)
 
 
-def _kill(pool: concurrent.futures.ProcessPoolExecutor) -> None:
+def _kill(pool: concurrent.futures.ProcessPoolExecutor, live: _Live) -> None:
     """Kill a pool's workers (not wait for their jobs) and release it."""
     with _SPAWN_LOCK:  # a pool forking in another thread has recorded all its workers first
-        with _LIVE_LOCK:
-            _, workers = _LIVE.get(pool, (None, []))
-            workers = list(workers)
+        workers = list(live.workers)
     for p in workers:
         with contextlib.suppress(OSError, ValueError):
             p.kill()
     # its manager thread sees the workers gone and ends; waited for, since it closes its wake-up pipe as it ends and at
     # exit CPython writes to the pipes of those still running without a lock ("Bad file descriptor" after a SIGTERM in CI)
-    pool.shutdown(wait=True, cancel_futures=True)
+    with live.closing:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def stop_pools(thread: threading.Thread) -> None:
@@ -178,9 +189,9 @@ def stop_pools(thread: threading.Thread) -> None:
     another thread)."""
     with _LIVE_LOCK:
         _STOPPED.add(thread)
-        pools = [pool for pool, (owner, _) in _LIVE.items() if owner is thread]
-    for pool in pools:
-        _kill(pool)
+        pools = [(pool, live) for pool, live in _LIVE.items() if live.owner is thread]
+    for pool, live in pools:
+        _kill(pool, live)
 
 
 @contextlib.contextmanager
@@ -191,19 +202,20 @@ def worker_pool(workers: int, initializer: Callable[..., None] | None = None, in
     workers = max(1, min(workers, _BUDGET or workers))
     pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_child_init,
                                                   initargs=(os.getpid(), initializer, initargs))
-    forked: list[multiprocessing.process.BaseProcess] = []
+    live = _Live(threading.current_thread())
     with _LIVE_LOCK:
         if threading.current_thread() in _STOPPED:
             pool.shutdown(wait=False)  # no worker was forked yet: they start with the first job
             raise Stopped(f"thread '{threading.current_thread().name}' was stopped: it starts no more workers")
-        _LIVE[pool] = (threading.current_thread(), forked)
+        _LIVE[pool] = live
     try:
         with _SPAWN_LOCK, _signals_deferred():
-            _fork_workers(pool, forked)
+            _fork_workers(pool, live.workers)
         yield pool
-        pool.shutdown(wait=True)
+        with live.closing:
+            pool.shutdown(wait=True)
     except BaseException:
-        _kill(pool)
+        _kill(pool, live)
         raise
     finally:
         with _LIVE_LOCK:
