@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from planner.bench import MotionBench
+from planner.cli.bench import MotionBench
 from planner.motion import PHASE_SECONDS, PHASES
 
 

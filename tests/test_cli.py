@@ -12,10 +12,11 @@ import sys
 
 import pytest
 
+from planner.cli.arguments import Command, task_argument
+from planner.cli.progress import Bars
 from planner.core.paths import PROJECT_ROOT
 from planner.pipeline import PIPELINE
-from workbench.cli import main, parser, task_argument
-from workbench.progress import Bars
+from workbench.cli import command_line, main
 
 
 def regrasp(*args: str) -> subprocess.CompletedProcess:
@@ -77,16 +78,20 @@ def test_bench_collision_json(tmp_path):
 # A command line that teaches itself (issue 14, item 6).
 
 
-def _parsers() -> dict[str, argparse.ArgumentParser]:
-    """Every (sub-)command's parser by its full name, e.g. 'plan', 'bench collision'."""
-    found, todo = {}, [("", parser())]
-    while todo:
-        name, p = todo.pop()
-        found[name] = p
-        for action in p._actions:
-            if isinstance(action, argparse._SubParsersAction):
-                todo += [(f"{name} {sub}".strip(), sp) for sub, sp in action.choices.items()]
-    return found
+def _commands() -> dict[str, Command]:
+    """Every (sub-)command by its full name, e.g. 'plan', 'bench collision' ('' is the top level), with its options."""
+    return command_line().commands
+
+
+def parser() -> argparse.ArgumentParser:
+    return command_line().root
+
+
+def test_every_option_is_known_by_its_command():
+    """The options each command's usage lists are the ones it was given through `Command.add` (what the tests below see)."""
+    for name, command in _commands().items():
+        listed = set(re.findall(r"(?<![\w-])(--?[a-z][a-z-]*)", command.parser.format_usage())) - {"-h", "--version"}
+        assert listed == {option for action in command.arguments for option in action.option_strings}, name
 
 
 def test_regrasp_alone_prints_help():
@@ -105,12 +110,13 @@ def test_version():
 
 
 def test_task_is_the_same_positional_in_every_command():
-    takes_task = {name for name, p in _parsers().items() if any(a.dest == "task" for a in p._actions)}
+    commands = _commands()
+    takes_task = {name for name, c in commands.items() if any(a.dest == "task" for a in c.arguments)}
     assert takes_task == {"workbench", "check", "plan", "roadmap", "grasps", "bench collision", "bench double-grasps", "bench motion"}
     for name in takes_task:
-        (task,) = [a for a in _parsers()[name]._actions if a.dest == "task"]
+        (task,) = [a for a in commands[name].arguments if a.dest == "task"]
         assert task.option_strings == [] and task.type is task_argument and task.nargs == "?", name
-    assert not any("--task" in a.option_strings for p in _parsers().values() for a in p._actions)
+    assert not any("--task" in c.parser.format_help() for c in commands.values())
     args = parser().parse_args(["roadmap", "baxter"])
     assert args.task == PROJECT_ROOT / "assets" / "tasks" / "baxter.toml"
     assert parser().parse_args(["bench", "collision"]).task.name == "default.toml"
@@ -129,11 +135,9 @@ def test_wrong_task_name_suggests_and_lists(tmp_path):
 
 
 def test_every_option_has_help_and_shows_its_default():
-    for name, p in _parsers().items():
-        text = p.format_help()
-        for action in p._actions:
-            if isinstance(action, argparse._HelpAction | argparse._VersionAction | argparse._SubParsersAction):
-                continue
+    for name, command in _commands().items():
+        text = command.parser.format_help()
+        for action in command.arguments:
             assert action.help, f"regrasp {name}: {action.dest} has no help"
             if action.default not in (None, False):
                 # argparse wraps long words (a default path) at the terminal's width: compared without whitespace
@@ -142,7 +146,7 @@ def test_every_option_has_help_and_shows_its_default():
 
 
 def test_plan_help_lists_the_steps():
-    text = _parsers()["plan"].format_help()
+    text = _commands()["plan"].parser.format_help()
     for step in PIPELINE:
         assert f"  {step.name} " in text
 

@@ -15,6 +15,7 @@ import pytest
 from sandbox import EXAMPLE, one_error_line
 from test_workbench_browser import _free_port
 
+from planner.cli.plan import params_text
 from planner.core.bounds import SEED
 from planner.core.errors import InputError, RegraspError
 from planner.core.paths import DEFAULT_TASK
@@ -24,7 +25,7 @@ from planner.handover.exchange_grid import MAX_GRID_NODES, grid_nodes
 from planner.model.task import load_task
 from planner.pipeline import PIPELINE
 from workbench.app import Workbench
-from workbench.cli import main, params_text
+from workbench.cli import main
 
 
 def _forbid_runs(monkeypatch: pytest.MonkeyPatch) -> None:

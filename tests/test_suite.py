@@ -24,10 +24,10 @@ from planner.core.tomlread import load_toml
 from planner.core.user_cache import computing
 from planner.model.task import find_task, load_task
 from planner.suite.generate import generate_tasks
+from planner.suite.report import write_report
 from planner.suite.spec import load_suite
 from planner.suite.toml_text import toml_text
 from workbench.cli import main
-from workbench.suite_report import write_report
 
 UNTIL = "place_grasps"
 PLAN_SEED = 3  # the session tests' seed, whose statuette grasp lists are in the shared test cache

@@ -14,14 +14,14 @@ import pytest
 from playwright.sync_api import Browser, Page
 from test_workbench_browser import EXAMPLE, VIEWPORT, _free_port, _wait_for
 
+from planner.core.plain_text import plain
 from planner.core.session import MANIFEST, Session
 from planner.model.task import load_task
+from planner.suite.report import report_html
 from planner.suite.spec import load_suite
 from workbench.app import Workbench
 from workbench.export import session_html
 from workbench.step_table import step_details, step_table
-from workbench.suite_report import report_html
-from workbench.text import plain
 
 PAYLOAD = "<iframe style=\"display:none\" srcdoc=\"<script>parent.document.title='PWNED'</script>\"></iframe>"
 MARKUP = [PAYLOAD, "<img src=x onerror=alert(1)>", "![x](http://evil.example/t.png)", "[a](javascript:alert(1))",

@@ -17,6 +17,7 @@ from planner.collision.checker import CollisionChecker, build_collision_model
 from planner.core.errors import RegraspError
 from planner.core.forked import sigterm_unwinds
 from planner.core.paths import DEFAULT_TASK, PROJECT_ROOT, TASKS_DIR
+from planner.core.plain_text import plain
 from planner.core.session import MANIFEST, Session
 from planner.model.task import Scene, load_task
 
@@ -29,7 +30,6 @@ from .scene_layer import SceneLayer
 from .session_layers import SessionLayers
 from .session_panel import INITIAL, MOVED, OTHER, SessionPanel
 from .session_store import SESSIONS_DIR
-from .text import plain
 from .view import CAMERA_LOOK_AT, CAMERA_POSITION, close_up, move_cameras, setup_view
 
 MAX_LISTED_PAIRS = 8

@@ -19,6 +19,7 @@ import viser
 from planner.core.bounds import SEED, seed_problem
 from planner.core.errors import RegraspError
 from planner.core.forked import stop_pools
+from planner.core.plain_text import plain
 from planner.core.runner import ProgressFactory, run_pipeline
 from planner.core.session import Session
 from planner.core.steps import Progress, Step
@@ -39,7 +40,6 @@ from .session_store import (
     scratch_folder,
 )
 from .step_table import step_details, step_table
-from .text import plain
 
 if TYPE_CHECKING:
     from .app import Workbench

@@ -4,11 +4,11 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.pipeline import PIPELINE
 
 from .layers import LAYERS
-from .text import plain
 
 MAX_FIGURES = 3  # per row when a step names no key figures: the panel is narrow; the details view shows them all
 MAX_TEXT = 16  # characters of a text figure in the table

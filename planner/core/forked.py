@@ -6,7 +6,7 @@ only the results travel back, pickled. Falls back to running inline where fork i
 Workers never outlive their parent: each asks the kernel for SIGKILL when the thread that forked
 it dies (Linux `PR_SET_PDEATHSIG`, so even `kill -9` of the parent ends them), a pool left by an
 exception (Ctrl-C, SIGTERM turned into `Terminated`) is killed rather than waited for (its workers are
-forked together, those signals held until every one is in the pool's map), and
+forked together, those signals held until every one is recorded as the pool's), and
 `stop_pools(thread)` kills the live pools a thread made (the workbench's background run, when it shuts down)
 and refuses it any new one (`Stopped`): at exit CPython waits for every pool's jobs, so a pool started
 after the kill, between two of a step's pools, kept a stopped workbench alive for minutes.
@@ -21,6 +21,7 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import ctypes
+import dataclasses
 import multiprocessing
 import os
 import signal
@@ -35,7 +36,19 @@ PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None  # in a forked_map worker only: its jobs (set by its initializer)
 _BUDGET: int | None = None  # CPUs this process may use (cpu_budget); None: every CPU it is allowed to run on
-_LIVE: dict[concurrent.futures.ProcessPoolExecutor, threading.Thread] = {}  # live pools, by the thread that made them
+
+
+@dataclasses.dataclass
+class _Live:
+    """A live pool's thread, its worker processes (recorded once forked, under _SPAWN_LOCK) and the lock its shutdowns
+    take: CPython's `shutdown(wait=True)` run in two threads at once closes the pool's result queue twice."""
+
+    owner: threading.Thread
+    workers: list[multiprocessing.process.BaseProcess] = dataclasses.field(default_factory=list)
+    closing: threading.Lock = dataclasses.field(default_factory=threading.Lock)
+
+
+_LIVE: dict[concurrent.futures.ProcessPoolExecutor, _Live] = {}  # live pools
 _STOPPED: weakref.WeakSet[threading.Thread] = weakref.WeakSet()  # threads stop_pools was called for: no new pool
 _LIVE_LOCK = threading.Lock()  # guards _LIVE and _STOPPED
 _SPAWN_LOCK = threading.Lock()  # held while a pool forks its workers
@@ -128,7 +141,7 @@ def _child_init(parent: int, initializer: Callable[..., None] | None, initargs: 
 def _signals_deferred() -> Iterator[None]:
     """In the main thread: SIGTERM and SIGINT that arrive inside are handled on the way out, not in the middle.
 
-    A worker forked but not yet entered in its pool's map would escape `_kill` (it died only later, by its
+    A worker forked but not yet recorded as its pool's would escape `_kill` (it died only later, by its
     parent-death signal, after the parent had already exited)."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -148,20 +161,27 @@ def _signals_deferred() -> Iterator[None]:
                 signal.raise_signal(s)
 
 
-def _kill(pool: concurrent.futures.ProcessPoolExecutor) -> None:
+def _fork_workers(pool: concurrent.futures.ProcessPoolExecutor, into: list[multiprocessing.process.BaseProcess]) -> None:
+    """Make `pool` fork its workers (with fork, CPython forks every one at the first job) and record them `into`: the
+    children this process gained meanwhile (pools fork one at a time, under _SPAWN_LOCK)."""
+    before = set(multiprocessing.active_children())
+    try:
+        pool.submit(int)
+    finally:
+        into.extend(p for p in multiprocessing.active_children() if p not in before)
+
+
+def _kill(pool: concurrent.futures.ProcessPoolExecutor, live: _Live) -> None:
     """Kill a pool's workers (not wait for their jobs) and release it."""
-    with _SPAWN_LOCK:  # a pool forking in another thread has entered all its workers in its map first
-        processes = list((getattr(pool, "_processes", None) or {}).values())  # CPython's map of the pool's workers
-    for p in processes:
+    with _SPAWN_LOCK:  # a pool forking in another thread has recorded all its workers first
+        workers = list(live.workers)
+    for p in workers:
         with contextlib.suppress(OSError, ValueError):
             p.kill()
-    manager = getattr(pool, "_executor_manager_thread", None)
-    pool.shutdown(wait=False, cancel_futures=True)
-    for p in processes:
-        with contextlib.suppress(OSError, ValueError, AssertionError):
-            p.join()
-    if manager is not None:  # it closes its wake-up pipe as it ends; at exit, CPython writes to the pipes of those still
-        manager.join()  # running without a lock ("Bad file descriptor" after a SIGTERM in CI)
+    # its manager thread sees the workers gone and ends; waited for, since it closes its wake-up pipe as it ends and at
+    # exit CPython writes to the pipes of those still running without a lock ("Bad file descriptor" after a SIGTERM in CI)
+    with live.closing:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def stop_pools(thread: threading.Thread) -> None:
@@ -169,9 +189,9 @@ def stop_pools(thread: threading.Thread) -> None:
     another thread)."""
     with _LIVE_LOCK:
         _STOPPED.add(thread)
-        pools = [pool for pool, owner in _LIVE.items() if owner is thread]
-    for pool in pools:
-        _kill(pool)
+        pools = [(pool, live) for pool, live in _LIVE.items() if live.owner is thread]
+    for pool, live in pools:
+        _kill(pool, live)
 
 
 @contextlib.contextmanager
@@ -182,18 +202,20 @@ def worker_pool(workers: int, initializer: Callable[..., None] | None = None, in
     workers = max(1, min(workers, _BUDGET or workers))
     pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"), initializer=_child_init,
                                                   initargs=(os.getpid(), initializer, initargs))
+    live = _Live(threading.current_thread())
     with _LIVE_LOCK:
         if threading.current_thread() in _STOPPED:
             pool.shutdown(wait=False)  # no worker was forked yet: they start with the first job
             raise Stopped(f"thread '{threading.current_thread().name}' was stopped: it starts no more workers")
-        _LIVE[pool] = threading.current_thread()
+        _LIVE[pool] = live
     try:
         with _SPAWN_LOCK, _signals_deferred():
-            pool.submit(int)  # with fork, CPython forks every worker at the first job
+            _fork_workers(pool, live.workers)
         yield pool
-        pool.shutdown(wait=True)
+        with live.closing:
+            pool.shutdown(wait=True)
     except BaseException:
-        _kill(pool)
+        _kill(pool, live)
         raise
     finally:
         with _LIVE_LOCK:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import viser
 
+from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.grasping.grasp_list import GraspList, hand_spec_of
 from planner.handover.double_grasps import DoubleGrasps
@@ -14,7 +15,6 @@ from planner.model.task import Scene
 
 from ..meshes import matrix_wxyz
 from ..scene_layer import OBJECT_COLOR
-from ..text import plain
 from .arms import ARM_COLORS
 from .base import Host, Pose, StepLayer
 from .hands import HandMeshes

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from planner.core.plain_text import plain
 from planner.grasping.grasp_list import GraspList
 from planner.handover.grasp_configs import GraspConfigs
 from planner.handover.reach import fingertip_centre
 
-from ..text import plain
 from .base import Pose, StepLayer
 from .stages import stages_markdown
 

@@ -8,6 +8,7 @@ import numpy as np
 import trimesh
 import viser
 
+from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.grasping.figures import finger_spheres, object_points
 from planner.grasping.grasp_list import GraspList, hand_spec_of
@@ -15,7 +16,6 @@ from planner.model.hand_model import HandModel, load_hand_model
 from planner.model.task import Scene
 
 from ..meshes import matrix_wxyz
-from ..text import plain
 from .arms import ARM_COLORS
 from .base import Host, StepLayer
 from .hands import HAND_STYLE, HandMeshes

@@ -15,6 +15,7 @@ import time
 import numpy as np
 import viser
 
+from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.model.task import Scene
 from planner.motion.result import PHASE_SECONDS, PHASES, Motion
@@ -22,7 +23,6 @@ from planner.motion.result import PHASE_SECONDS, PHASES, Motion
 from ..meshes import matrix_wxyz
 from ..notify import error_text
 from ..scene_layer import OBJECT_COLOR
-from ..text import plain
 from .base import Host, StepLayer
 from .stages import FAILURE_COLOR
 

@@ -17,6 +17,7 @@ import time
 import numpy as np
 import viser
 
+from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.model.task import Scene
 from planner.motion.query import QueryResult, RoadmapQuery
@@ -24,7 +25,6 @@ from planner.roadmap.build import wrist_positions
 from planner.roadmap.result import Roadmap
 
 from ..notify import error_text
-from ..text import plain
 from .arms import ARM_COLORS
 from .base import Host, Pose, StepLayer
 

@@ -1,7 +1,7 @@
 """The stage table of an online step (grasp configurations, exchange, double grasps) as GUI markdown."""
 from __future__ import annotations
 
-from ..text import plain
+from planner.core.plain_text import plain
 
 FAILURE_COLOR = "#d22"
 

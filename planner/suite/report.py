@@ -13,11 +13,10 @@ from urllib.parse import quote
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from planner.core.plain_text import plain
 from planner.core.results import atomic_write_text
 from planner.model.environment import Environment
 from planner.suite.spec import Region, SuiteSpec
-
-from .text import plain
 
 OK, FAILED, INK, FAINT = "#2a9d4a", "#d1495b", "#222", "#888"
 STYLE = """

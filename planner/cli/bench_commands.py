@@ -1,0 +1,78 @@
+"""`regrasp bench collision`, `bench double-grasps` and `bench motion`: the benchmarks of planner/cli/bench.py with their
+options, printed as tables (and written as JSON with --json)."""
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from planner.cli.arguments import CommandLine, add_json, add_task, positive_int, seed_argument, write_json
+
+if TYPE_CHECKING:
+    from planner.model.task import Scene
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from planner.cli.bench import bench_collision
+    from planner.model.task import load_task
+
+    scene = load_task(args.task)
+    print(f"benchmarking collision checks on {scene.name} ({args.samples} configurations) ...", file=sys.stderr)
+    result = bench_collision(scene, samples=args.samples, seed=args.seed)
+    print(result.render())
+    if args.json:
+        write_json(Path(args.json), result.to_dict())
+    return 0
+
+
+def _bench_in_scratch(args: argparse.Namespace, bench: Callable[[Scene, Path, Callable[[str], None]], Any]) -> int:
+    """Run a benchmark that writes sessions into a scratch folder (deleted after), print its table and maybe its JSON."""
+    import tempfile
+
+    from planner.model.task import load_task
+
+    scene = load_task(args.task)
+    with tempfile.TemporaryDirectory(prefix="regrasp-bench-") as tmp:
+        result = bench(scene, Path(tmp), lambda m: print(m, file=sys.stderr))
+    print(result.render())
+    if args.json:
+        write_json(Path(args.json), result.to_dict())
+    return 0
+
+
+def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
+    from planner.cli.bench import bench_double_grasps
+
+    return _bench_in_scratch(args, lambda scene, tmp, say: bench_double_grasps(scene, args.seed, args.repeat, tmp, say))
+
+
+def _cmd_bench_motion(args: argparse.Namespace) -> int:
+    from planner.cli.bench import bench_motion
+
+    return _bench_in_scratch(args, lambda scene, tmp, say: bench_motion(scene, args.seeds, tmp, say, args.repeat))
+
+
+def add_bench(line: CommandLine) -> None:
+    """`regrasp bench` and its three benchmarks."""
+    line.group("bench", "benchmarks, printed as tables", dest="what", metavar="WHAT")
+    bc = line.command("collision", "collision checking and forward kinematics timings", _cmd_bench, within="bench")
+    add_task(bc)
+    bc.add("--samples", type=positive_int, default=2000, help="random configurations timed")
+    bc.add("--seed", type=seed_argument, default=0, help="seed of the configurations")
+    add_json(bc, "the figures")
+    bd = line.command("double-grasps", "grasp configurations, exchange position and double grasps, timed over runs",
+                      _cmd_bench_double_grasps, within="bench")
+    add_task(bd)
+    bd.add("--seed", type=seed_argument, default=0, help="session seed")
+    bd.add("--repeat", type=positive_int, default=5, help="runs timed")
+    add_json(bd, "the figures")
+    bm = line.command("motion", "Table I: the motion over seeds with the Super Graph and with RRTConnect alone", _cmd_bench_motion,
+                      within="bench")
+    add_task(bm)
+    bm.add("--seeds", type=positive_int, default=10, help="online seeds 0..N-1 (the grasp lists and roadmap: seed 0, cached)")
+    bm.add("--repeat", type=positive_int, default=1, metavar="K",
+           help="plan each seed K times and keep its fastest run (the motion is the same each time; on a busy "
+                "machine the fastest is the steadiest figure)")
+    add_json(bm, "the figures")
