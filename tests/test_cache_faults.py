@@ -113,6 +113,7 @@ def test_unreadable_entry_is_deleted_recomputed_and_told(default_scene: Scene, t
     assert snapshot(tmp_path, skip=(cache,)) == outside
 
 
+@pytest.mark.slow
 def test_cli_tells_a_corrupt_grasp_cache_in_one_line(tmp_path: Path) -> None:
     cache = tmp_path / "cache"
     args = ("grasps", "--hand", "right", "--frames", "2", "--json", str(tmp_path / "g.json"))

@@ -33,6 +33,7 @@ def test_check_default_task():
     assert "OK: a valid two-hand regrasping task" in out
 
 
+@pytest.mark.slow
 def test_check_second_robot():
     run = regrasp("check", "baxter")
     assert run.returncode == 0, run.stdout + run.stderr
@@ -122,6 +123,7 @@ def test_task_is_the_same_positional_in_every_command():
     assert parser().parse_args(["bench", "collision"]).task.name == "default.toml"
 
 
+@pytest.mark.slow
 def test_wrong_task_name_suggests_and_lists(tmp_path):
     for args in (("check", "defualt"), ("plan", "defualt", "--out", str(tmp_path / "s")), ("roadmap", "baxtr")):
         run = regrasp(*args)

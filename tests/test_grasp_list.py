@@ -178,6 +178,7 @@ def test_lists_are_cached_by_hand_mesh_parameters_and_seed(default_scene, monkey
     assert not grasp_list(spec, "left", mesh, p, seed=1, workers=1)[1]
 
 
+@pytest.mark.slow
 def test_a_torus_works_unchanged(default_scene):
     torus = trimesh.creation.torus(major_radius=0.05, minor_radius=0.018, major_sections=48, minor_sections=24)
     spec = default_scene.robot.spec.arm("left").hand

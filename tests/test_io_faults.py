@@ -106,6 +106,7 @@ def test_out_folder_without_write_permission(tmp_path: Path) -> None:
     assert snapshot(tmp_path) == before
 
 
+@pytest.mark.slow
 def test_read_only_file_system(tmp_path: Path) -> None:
     report = _in_tmpfs(tmp_path, "1m", "read-only", str(EXAMPLE))
     mnt = tmp_path / "mnt"
@@ -114,6 +115,7 @@ def test_read_only_file_system(tmp_path: Path) -> None:
     assert report["files"] == ["out"]
 
 
+@pytest.mark.slow
 def test_full_disk_keeps_the_finished_steps_and_no_temporary_file(tmp_path: Path) -> None:
     report = _in_tmpfs(tmp_path, "2m", "full", str(EXAMPLE), str(FREE_BYTES))
     mnt = tmp_path / "mnt"

@@ -15,6 +15,8 @@ import pytest
 from sandbox import cli_env
 from test_workbench_browser import _free_port, _wait_for
 
+pytestmark = pytest.mark.slow  # each test starts and signals whole planner processes
+
 WORKERS_START_WITHIN = 900.0  # s: a cold cache builds the pair set, the finger workspaces and the object model first
 WORKERS_GONE_WITHIN = 30.0  # s: a timeout, not a measurement; the kernel kills them at once
 

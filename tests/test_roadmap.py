@@ -54,6 +54,7 @@ def _roadmap_collisions(oracle: Oracle, roadmap: Roadmap) -> list[str]:
     return found
 
 
+@pytest.mark.slow
 def test_every_super_graph_node_and_edge_is_free_by_the_oracle(small, oracle):
     """Nodes, and edges re-checked at the oracle's own resolution, with the URDFs' own meshes."""
     assert len(small.node_q) > 40 and len(small.edges) > 20
@@ -61,6 +62,7 @@ def test_every_super_graph_node_and_edge_is_free_by_the_oracle(small, oracle):
     assert not found, f"{len(found)} collisions, first: {found[:3]}"
 
 
+@pytest.mark.slow
 def test_the_oracle_catches_a_checker_blind_to_hand_obstacle_pairs(default_scene, oracle, monkeypatch):
     """The same roadmap built by a checker that skips every hand-obstacle pair is not free by the oracle."""
     real = roadmap_build.pair_subsets

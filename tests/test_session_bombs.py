@@ -82,6 +82,7 @@ def test_a_bomb_is_one_line_naming_file_field_and_limit_within_2_gb(session: Pat
     assert not (tmp_path / "out.html").exists()
 
 
+@pytest.mark.slow
 def test_an_entry_no_step_declares_is_never_decompressed(session: Path, tmp_path: Path) -> None:
     """A 2.5 GB entry (12 MB compressed) beside a step's arrays: the session exports within 2 GB, never reading it."""
     size, chunk = 5 * 2**29, bytes(2**24)

@@ -102,6 +102,7 @@ def test_task_files_are_written_as_they_were_read():
         assert tomllib.loads(toml_text(data)) == data
 
 
+@pytest.mark.slow
 def test_generation_is_deterministic_and_every_task_passes_check(local_run, suite_file, tmp_path):
     tasks = generate_tasks(load_suite(suite_file), tmp_path, workers=1)  # the suite drew them on two workers
     assert [t.id for t in tasks] == ["0001-statuette", "0002-statuette", "0003-statuette", "0004-statuette"]
@@ -145,6 +146,7 @@ def test_bad_suite_fields_are_named_before_any_folder_is_made(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_an_existing_suite_is_kept_without_resume_or_force(local_run, suite_file, capsys):
     before = (local_run / "suite.json").read_bytes()
     assert main(["suite", str(suite_file), "--out", str(local_run), "--until", UNTIL]) == 2
@@ -175,6 +177,7 @@ def test_a_cache_entry_is_computed_by_one_process_at_a_time(tmp_path):
     assert marks == ["start", "end", "start", "end"]  # never two starts in a row: the second waited for the first
 
 
+@pytest.mark.slow
 def test_suite_records_every_task(local_run):
     data = json.loads((local_run / "suite.json").read_text())
     assert data["tasks"] == data["succeeded"] == 4 and data["success_rate"] == 1.0 and data["by_stage"] == {}

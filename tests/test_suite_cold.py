@@ -101,6 +101,7 @@ def test_a_cold_suite_on_ray_ends(tmp_path):
     assert [r["success"] for r in _results(tmp_path)] == [True, True]
 
 
+@pytest.mark.slow
 def test_a_task_past_its_time_limit_fails_at_stage_timeout_and_the_suite_goes_on(tmp_path):
     done, _ = _run(tmp_path, ["--workers", "1"], extra="task_timeout = 0.5")
     assert done.returncode == 0, done.stderr[-2000:]

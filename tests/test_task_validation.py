@@ -209,6 +209,7 @@ def test_hand_size_comes_from_the_spec_and_warns_with_the_unit(tmp_path, default
     assert "centimetres? then set scale = 0.01" in warning or "decimetres? then set scale = 0.1" in warning
 
 
+@pytest.mark.slow
 def test_plan_refuses_a_placement_inside_an_obstacle_with_checks_message(tmp_path):
     inside = TASK_TEXT.replace("final = { xyz = [0.50, 0.85, 0.72]", "final = { xyz = [0.55, 0.05, 0.72]")  # in the vase
     path = _task(tmp_path, inside)

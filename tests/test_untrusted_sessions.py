@@ -113,6 +113,7 @@ def test_workbench_refuses_a_spec_name_with_a_path_before_serving(sandbox: Sandb
 # -- 2. the files a step lists: never deleted outside the session ----------------------------------------------------
 
 
+@pytest.mark.slow
 def test_plan_force_deletes_only_the_sessions_own_files(sandbox: Sandbox) -> None:
     victims = [sandbox.outside / "victim.txt", sandbox.outside / "other.txt"]
     victims[1].write_text("keep me too")

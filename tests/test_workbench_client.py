@@ -73,6 +73,7 @@ def _refusals(caplog: pytest.LogCaptureFixture) -> list[str]:
     return lines
 
 
+@pytest.mark.slow
 def test_dropdown_values_outside_their_options_are_refused(bench: Workbench, folders: Path,
                                                            caplog: pytest.LogCaptureFixture) -> None:
     panel = bench.session_panel
