@@ -108,16 +108,20 @@ class DoubleGraspPlanner:
         support_i, support_f = c.supports(oi), c.supports(of)
         closing_a, closing_b = Situation(None, oi, tips_a), Situation(a.arm, g_a, tips_b)
 
-        # Grasp: (pre-grasp, pre-shape + approach + closing) candidates
-        def grasp(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
-            pre_a, approach = shaped[0], shaped[1][::-1]
-            q_pre = hand.set(approach[0], a.arm, open_a)
-            out = [c.contact(GRASP, "approach", approach, static_i, a.arm)]
-            out = c.fingers(GRASP, "pre-shape", q_pre, a.arm, pre_a, static_i) + out
-            out += c.fingers(GRASP, "closing", approach[-1], a.arm, a.fingers, closing_a)
-            c.ready(q_pre, static_i, GRASP, "pre-grasp")
-            return q_pre, out
+        def take(phase: Phase, g: HandGrasp, opened: np.ndarray, around: Situation, closing: Situation, label: str):
+            """A hand's (pre-grasp, pre-shape + approach + closing) candidate, for the first grasp and the exchange alike."""
+            def build(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
+                pre, approach = shaped[0], shaped[1][::-1]
+                q_pre = hand.set(approach[0], g.arm, opened)
+                out = [c.contact(phase, "approach", approach, around, g.arm)]
+                out = c.fingers(phase, "pre-shape", q_pre, g.arm, pre, around) + out
+                out += c.fingers(phase, "closing", approach[-1], g.arm, g.fingers, closing)
+                c.ready(q_pre, around, phase, label)
+                return q_pre, out
+            return build
 
+        # Grasp: (pre-grasp, pre-shape + approach + closing) candidates
+        grasp = take(GRASP, a, open_a, static_i, closing_a, "pre-grasp")
         approaches = c.shaped(a, retreats(arms, q_grasp, a.arm, None, True, GRASP, "pre-grasp"), static_i, closing_a)
         grasps = options(GRASP, "pre-grasp", approaches, grasp)
         first_grasp = next(grasps)
@@ -131,14 +135,7 @@ class DoubleGraspPlanner:
         q_lifted, lifted, _ = next(freest(options(CARRY, "lift", iter(c.lifts(oi, q_grasp, a.arm, CARRY)), lift_off)))
         q_x = hand.set(q_exch, a.arm, a.fingers)
 
-        def exchange(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
-            pre_b, approach_b = shaped[0], shaped[1][::-1]
-            q_pre_b = hand.set(approach_b[0], b.arm, open_b)
-            out = [c.contact(CARRY, "approach", approach_b, held_a, b.arm)]
-            out = c.fingers(CARRY, "pre-shape", q_pre_b, b.arm, pre_b, held_a) + out
-            out += c.fingers(CARRY, "closing", approach_b[-1], b.arm, b.fingers, closing_b)
-            c.ready(q_pre_b, held_a, CARRY, "exchange pre-grasp")
-            return q_pre_b, out
+        exchange = take(CARRY, b, open_b, held_a, closing_b, "exchange pre-grasp")
 
         def leave(situation: Situation, after: Situation, phase: Phase, arm: str):
             def build(retreat: np.ndarray) -> list[Piece]:
