@@ -1,2 +1,2 @@
-"""Run the method: steps, the pipeline and its runner, sessions, results, caches, paths, TOML reading, forked workers, text made
+"""Run the method: steps and their runner, sessions, results, caches, paths, TOML reading, forked workers, text made
 safe for markdown and HTML."""
