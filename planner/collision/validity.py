@@ -2,7 +2,7 @@
 
 One way to ask "is this configuration / this straight motion valid here": a `Validity` checks a
 named pair subset of a situation's collision model (see situation.py) with the local planner's
-displacement bound (roadmap/local_planner.py), so a valid motion keeps every checked pair at least
+displacement bound (segments.py), so a valid motion keeps every checked pair at least
 its clearance apart along the whole continuous segment. Two profiles state the paddings:
 `transit` keeps the offline roadmap's clearances (so roadmap edges and new edges guarantee the same),
 its paddings lowered per motion, pair by pair, to what the motion's ends allow (`Clearances.fitted_pairs`);
@@ -47,7 +47,7 @@ class Profile:
     self_clearance: float
     object_padding: float  # robot–object pairs
     object_clearance: float
-    coarse: int = 1  # segments checked coarse first at this factor (see roadmap/local_planner.py); 1: densely throughout
+    coarse: int = 1  # segments checked coarse first at this factor (see segments.py); 1: densely throughout
 
     def describe(self) -> dict:
         """The paddings and clearances, and the largest relative displacement between two checks of each kind of pair (and
