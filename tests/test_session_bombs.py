@@ -168,3 +168,19 @@ def test_the_arrays_of_all_a_sessions_files_share_one_budget(session: Path, monk
     err = _open_error(session)
     assert err.source.endswith(".npz") and Path(err.source).parent == session
     assert f"{limit:,} bytes allowed for one session" in err.detail, err.detail
+
+
+def test_an_entry_of_an_unsupported_compression_method_is_one_line(tmp_path: Path) -> None:
+    """A crafted .npz whose entry names a compression method zipfile lacks (99, AES) is bad input, not a traceback."""
+    from planner.core.errors import InputError
+    from planner.core.npz import read_npz
+
+    path = tmp_path / "crafted.npz"
+    np.savez(path, q=np.zeros(3))
+    data = bytearray(path.read_bytes())
+    for signature, offset in ((b"PK\x03\x04", 8), (b"PK\x01\x02", 10)):  # local header, central directory: method field
+        at = data.find(signature)
+        data[at + offset: at + offset + 2] = (99).to_bytes(2, "little")
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError, match="crafted.npz.*not a readable .npz file.*NotImplementedError"):
+        read_npz(path, {"q": (np.dtype("<f8"), (3,))})
