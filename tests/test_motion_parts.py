@@ -18,39 +18,10 @@ from oracle import Oracle
 
 from planner.motion.result import MotionParams
 from planner.motion.space import JointSpace
-from planner.motion.timing import sample_polyline, segment_duration
 from planner.motion.transit import TransitParams, shortcut
 
 TRANSIT = TransitParams.of(MotionParams())
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
-
-
-def test_trapezoid_durations_analytic():
-    vmax, amax = np.array([1.0, 2.0]), np.array([2.0, 2.0])
-    # joint 0 moves 2 rad: cruise at 1 rad/s after 0.5 s of acceleration -> 0.5 + 1.5 + 0.5 = 2.5 s
-    assert segment_duration(np.array([2.0, 0.0]), vmax, amax)[0] == pytest.approx(2.5)
-    # 0.2 rad never reaches the speed limit: triangle, 2 sqrt(0.2 / 2) s
-    assert segment_duration(np.array([0.2, 0.0]), vmax, amax)[0] == pytest.approx(2 * np.sqrt(0.1))
-
-
-def test_sampled_polyline_respects_limits_and_hits_waypoints():
-    rng = np.random.default_rng(3)
-    path = np.cumsum(rng.normal(0, 0.6, (6, 4)), axis=0)
-    vmax, amax, dt = np.array([1.0, 0.5, 2.0, 1.5]), np.array([2.0, 1.0, 3.0, 2.5]), 1 / 50
-    seg, q = sample_polyline(path, vmax, amax, dt)
-    q = np.concatenate([path[:1], q])
-    v = np.diff(q, axis=0) / dt
-    assert np.all(np.abs(v) <= vmax * (1 + 1e-9))
-    # second differences of a C1 motion whose acceleration is bounded by amax are bounded by amax dt^2
-    a = np.diff(v, axis=0) / dt
-    assert np.all(np.abs(a) <= amax * (1 + 1e-6))
-    for w in path[1:]:
-        assert np.min(np.linalg.norm(q - w, axis=1)) < 1e-12
-    # every sample lies on its segment
-    for k, qi in zip(seg, q[1:]):
-        a0, b0 = path[k], path[k + 1]
-        s = np.dot(qi - a0, b0 - a0) / np.dot(b0 - a0, b0 - a0)
-        assert -1e-12 <= s <= 1 + 1e-12 and np.allclose(a0 + s * (b0 - a0), qi)
 
 
 def test_joint_space_holds_and_reduces():

@@ -143,6 +143,7 @@ class MotionBench:
                 "ours_transit_checks_median": ours["transit_checks"], "rrt_transit_checks_median": rrt["transit_checks"],
                 "check_ratio": rrt["transit_checks"] / ours["transit_checks"] if ours["transit_checks"] > 0 else None,
                 "ours_success": ours["success"], "rrt_success": rrt["success"],
+                "ours_duration_median": ours["duration"], "rrt_duration_median": rrt["duration"],
                 "full_check_us_before": self.check_us[0], "full_check_us_after": self.check_us[1],
                 "phases": {"ours": ours["phases"], "rrt": rrt["phases"]}, "runs": self.runs}
 
@@ -165,8 +166,12 @@ class MotionBench:
                            "edges_invalidated": _median([r["edges_invalidated"] for r in rows]),
                            "rrt_calls": _median([r["rrt_calls"] for r in rows]),
                            "transit_checks": _median([r["transit_checks"] for r in rows]),
-                           "path_length": _median([r["path_length"] for r in rows]), "duration": _median([r["duration"] for r in rows])})
+                           "smoothing_checks": _median([r.get("smoothing_checks", 0) for r in rows]),
+                           "path_length": _median([r["path_length"] for r in rows]),
+                           "straight_distance": _median([r.get("straight_distance", np.nan) for r in rows]),
+                           "duration": _median([r["duration"] for r in rows])})
         return {"seconds": _median([r["seconds"] for r in runs]), "success": sum(r["success"] for r in runs) / len(runs),
+                "duration": _median([sum(p["duration"] for p in r["phases"]) for r in runs if r["success"]]),
                 "transit_checks": _median([sum(p["transit_checks"] for p in r["phases"]) for r in runs if r["phases"]]),
                 "phases": phases, "where": self.where(planner)}
 
@@ -194,13 +199,14 @@ class MotionBench:
             s = self.summary(planner)
             fastest = f" (the fastest of {self.repeat} runs each)" if self.repeat > 1 else ""
             out += [f"{title}: median {s['seconds']:.2f} s over {len(self.seeds)} seeds{fastest}, success {s['success']:.0%}, "
-                    f"{s['transit_checks']:.0f} transit collision checks",
+                    f"{s['transit_checks']:.0f} transit collision checks, motion {s['duration']:.2f} s long",
                     f"{'phase':<7}{'nodes plan':>11}{'s plan':>8}{'nodes val':>10}{'s val':>8}{'invalid':>8}{'RRT':>5}"
-                    f"{'checks':>8}{'s total':>9}{'success':>8}{'length':>8}{'duration':>9}"]
+                    f"{'checks':>8}{'smooth':>8}{'s total':>9}{'success':>8}{'length':>8}{'straight':>9}{'duration':>9}"]
             for r in s["phases"]:
                 out.append(f"{r['phase']:<7}{r['nodes_planning']:>11.0f}{r['seconds_planning']:>8.2f}{r['nodes_validating']:>10.0f}"
                            f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['rrt_calls']:>5.0f}{r['transit_checks']:>8.0f}"
-                           f"{r['seconds']:>9.2f}{r['success']:>8.0%}{r['path_length']:>8.2f}{r['duration']:>9.2f}")
+                           f"{r['smoothing_checks']:>8.0f}{r['seconds']:>9.2f}{r['success']:>8.0%}{r['path_length']:>8.2f}"
+                           f"{r['straight_distance']:>9.2f}{r['duration']:>9.2f}")
             out.append("where the time goes (median s): " + ", ".join(f"{k} {v:.2f}" for k, v in s["where"].items())
                        + " (other: the wall time minus the rest; below 0 when the phases' transits ran in parallel)")
             out.append("")

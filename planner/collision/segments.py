@@ -17,11 +17,17 @@ k-th of those configurations with each pair padded by P = c + k (p - c), so that
 it moves at most 2 (P - c); where both ends of such an interval pass, the pair keeps c along it.
 Only the intervals next to a configuration that fails at P are checked at all their configurations
 (padding p). Same guarantee, far fewer checks where the motion stays away from things.
+
+Curves (a timed trajectory whose pieces bound each joint's speed, see `Curve`): within a piece of duration h
+where joint j moves no faster than w_j, a point of g moves at most h sum_j w_j r_j(g); the same bound, summed over
+pieces, is a clock u(t) along which the curve moves no faster than a straight segment of the same length in u.
+The curve is checked at evenly spaced values of u (coarse first alike): the guarantee of a straight segment.
 """
 from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -97,6 +103,14 @@ def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, 
     return out
 
 
+class Curve(Protocol):
+    """A timed motion: its pieces' breakpoints and, per piece and joint, a bound on the joint's speed in it."""
+
+    def speed_bounds(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def positions(self, times: np.ndarray) -> np.ndarray: ...
+
+
 class SegmentChecker:
     """Checks configurations and straight segments against named pair subsets (one per process); `coarse`: see the
     module (1: every configuration at the paddings). `checker`: collision scratch data to share with other segment
@@ -119,6 +133,7 @@ class SegmentChecker:
         allow = allowances(cm, env_clearance, self_clearance, object_clearance)
         self._per_pair = sweep / (2.0 * allow)[:, None]
         self._weights: dict[str, np.ndarray] = {}
+        self._leading_rows: dict[tuple[str, bytes], np.ndarray] = {}
         self.coarse = int(coarse)
         self._coarse_margins = pair_table(cm, paddings + (self.coarse - 1) * allow) if coarse > 1 else None
 
@@ -154,15 +169,45 @@ class SegmentChecker:
 
     def first_hit(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> np.ndarray | None:
         """The first configuration of the segment, in checking order, whose check fails; None when all pass."""
-        n, dq = int(self.steps(qa, qb, subset)[0]), qb - qa
-        if self._coarse_margins is not None and n > 2 * self.coarse + 1:
-            def hits(s: float, coarse: bool) -> bool:
-                return self.in_collision(qa + s * dq, subset, coarse)
+        dq = qb - qa
+        return self._first_hit(int(self.steps(qa, qb, subset)[0]), lambda s: qa + s * dq, subset, ends)
 
-            s = coarse_first(n, self.coarse, hits, ends)
-            return None if s is None else qa + s * dq
-        s = van_der_corput(n)
-        for q in qa + np.outer(s if ends else s[2:], dq):
+    def curve_first_hit(self, curve: Curve, subset: str, ends: bool = True) -> np.ndarray | None:
+        """The first configuration of a curve, in checking order, whose check fails; None when all pass (see the
+        module: as many checks as a straight segment moving as far; `ends=False`: both ends are known free)."""
+        t, bound = curve.speed_bounds()
+        moving = np.flatnonzero(bound.max(axis=0) > 0)
+        rates = np.einsum("kj,rj->kr", bound[:, moving], self._leading(subset, moving)).max(axis=1)  # no BLAS threads in a worker
+        clock = np.concatenate([[0.0], np.cumsum(rates * np.diff(t))])
+
+        n = int(np.ceil(clock[-1])) + 1
+        grid = self._grid(n)  # every parameter a check may read, evaluated at once
+        q = curve.positions(np.interp(np.linspace(0.0, clock[-1], grid), clock, t))
+        return self._first_hit(n, lambda s: q[int(round(s * (grid - 1)))], subset, ends)
+
+    def _leading(self, subset: str, moving: np.ndarray) -> np.ndarray:
+        """The subset's distinct displacement weights over the moving joints (a few hundred of a thousand rows), once
+        per set of joints."""
+        key = (subset, moving.tobytes())
+        if key not in self._leading_rows:
+            self._leading_rows[key] = np.unique(self.weights(subset)[:, moving], axis=0)
+        return self._leading_rows[key]
+
+    def _grid(self, n: int) -> int:
+        """How many evenly spaced parameters the checks of n configurations may read (coarse first: see coarse_first)."""
+        if self._coarse_margins is not None and n > 2 * self.coarse + 1:
+            return -(-(n - 1) // self.coarse) * self.coarse + 1
+        return n
+
+    def _first_hit(self, n: int, at: Callable[[float], np.ndarray], subset: str, ends: bool) -> np.ndarray | None:
+        """The first of n evenly spaced configurations at(s), s in 0..1, whose check fails (coarse first, see the
+        module); None when all pass."""
+        if self._grid(n) != n:
+            s = coarse_first(n, self.coarse, lambda s, coarse: self.in_collision(at(s), subset, coarse), ends)
+            return None if s is None else at(s)
+        order = van_der_corput(n)
+        for s in (order if ends else order[2:]):
+            q = at(s)
             if self.in_collision(q, subset):
                 return q
         return None

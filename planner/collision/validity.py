@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from planner.collision.checker import CollisionChecker, CollisionModel, pair_table
-from planner.collision.segments import SegmentChecker, geometry_radii, two_level
+from planner.collision.segments import Curve, SegmentChecker, geometry_radii, two_level
 from planner.core.errors import RegraspError
 
 
@@ -98,6 +98,10 @@ class Validity:
         """Every check of the straight segment passes (`ends=False`: both ends are known valid)."""
         return self.seg.segment_free(qa, qb, self.subset, ends)
 
+    def curve_valid(self, curve: Curve, ends: bool = True) -> bool:
+        """Every check of a timed curve passes (see segments.py; `ends=False`: both ends are known valid)."""
+        return self.seg.curve_first_hit(curve, self.subset, ends) is None
+
     def samples(self, qa: np.ndarray, qb: np.ndarray, subset: str | None = None) -> int:
         """How many evenly spaced configurations a segment is checked at (its resolution), for this or another subset."""
         return int(self.seg.steps(qa, qb, subset or self.subset)[0])
@@ -158,6 +162,10 @@ class Graded:
             return self.fine.motion_valid(qa, qb, ends)
         dq = qb - qa
         return two_level(n, m, lambda s, coarse: not (self.coarse if coarse else self.fine).state_valid(qa + s * dq), ends) is None
+
+    def curve_valid(self, curve: Curve, ends: bool = True) -> bool:
+        """A timed curve checked at the fine paddings throughout (see Validity.curve_valid)."""
+        return self.fine.curve_valid(curve, ends)
 
 
 KINDS = ("env", "self", "object")

@@ -179,7 +179,7 @@ class DoubleGraspPlanner:
         q_end = hand.set(scene.q_final if direct else hand.set(scene.q_final, a.arm, let_a), b.arm, let_b)
         c.ready(q_end, static_f, REST, "final configuration")
         opening = [] if np.allclose(q_end, scene.q_final) else [
-            c.contact(REST, "opening", np.stack([q_end, scene.q_final]), static_f, None)]
+            c.contact(REST, "hands open", np.stack([q_end, scene.q_final]), static_f, None)]
 
         # the transits: independent of each other now that every contact motion is made; run longest first as measured
         # (Carry's, Place's, Rest's, Grasp's, the arm away), so the last to finish is a short one

@@ -9,6 +9,8 @@ import numpy as np
 from planner.collision.situation import Situation
 from planner.motion.phase import Phase
 
+TRANSIT_PARTS = ("transit", "arm away")  # the parts transit stages make (the others are contact motions)
+
 
 @dataclass(frozen=True)
 class Piece:

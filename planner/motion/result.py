@@ -47,6 +47,10 @@ class MotionParams:
     # joint-space length by a sixth and the duration by 4%, for 10% more checks)
     shortcut_attempts: int = bounded(0, 0, 10000, "shortcuts")
     shortcut_min_gain: float = bounded(0.1, 0.0, 10.0, "rad")  # a shortcut shortening the path (joint-space length) by less is not checked
+    # timing: parabolic shortcuts tried per run of the motion (between two rests), each checked before it is kept ...
+    smooth_attempts: int = bounded(300, 0, 100000, "shortcuts")
+    smooth_checks: int = bounded(5000, 0, 10000000, "collision checks")  # ... until the run's checks reach this
+    smooth_min_gain: float = bounded(0.02, 0.0, 10.0, "s")  # a parabolic shortcut saving less time is not checked
     # transit: an end the graph cannot reach is reconnected to this many of its nearest valid nodes
     goal_nodes: int = bounded(16, 1, 1000, "nodes")
     max_double_grasps: int = bounded(20, 1, 1000, "double grasps")  # tried, best first
@@ -83,7 +87,8 @@ class Motion:
     planner: str
     double_grasp: int  # rank of the double grasp used (-1 when none worked)
     tried: list  # per double grasp tried, best first: '' if used, else why it failed
-    phases: list  # per phase: nodes added planning / validating, edges invalidated, RRT calls, searches, length, duration
+    phases: list  # per phase: nodes added planning / validating, edges invalidated, RRT calls, searches, checks of transits
+    # and of smoothing, path length and straight distance, its transits' length and straight distance, duration
     arms: list  # arm names, the order of `holder` and `wrists`
     resolution: dict  # the transit and contact profiles
     stages: list

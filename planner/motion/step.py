@@ -1,7 +1,7 @@
 """The motion step (paper V-B): the whole task as one trajectory, the double grasps tried best first.
 
 Each double grasp is planned by its stages (double_grasp.py); the first whose every piece is valid is
-timed (timing.py) and sampled at a fixed rate. Measurements (seconds per phase and part) go to the
+smoothed and timed (smoothing.py) and sampled at a fixed rate (sampling.py). Measurements (seconds per phase and part) go to the
 step's session record, never into the result, so the result depends on the inputs and the seed only.
 """
 from __future__ import annotations
@@ -22,9 +22,10 @@ from planner.handover.double_grasps import DoubleGrasps
 from planner.model.task import Scene
 from planner.motion.double_grasp import DoubleGraspPlanner
 from planner.motion.graph import MotionGraph
-from planner.motion.piece import HandGrasp, Piece, PieceFailed
+from planner.motion.piece import TRANSIT_PARTS, HandGrasp, Piece, PieceFailed
 from planner.motion.result import PHASES, Motion, MotionParams
-from planner.motion.timing import sample_polyline
+from planner.motion.sampling import sample
+from planner.motion.smoothing import Smoother
 from planner.motion.validities import Validities
 from planner.roadmap.result import Roadmap
 
@@ -95,7 +96,7 @@ def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGras
             f"{i + 1}: {why}" for i, why in enumerate(tried)) if count else "no double grasp to move with"
         return _empty(p, robot, tried, resolution, failure), []
     t = time.perf_counter()
-    motion = _sampled(scene, pieces, p, tried, resolution, planner)
+    motion = _sampled(scene, pieces, p, tried, resolution, planner, rng)
     seconds = [x for s in planner.stats for x in (s.seconds_planning, s.seconds_validating, s.seconds_reconnecting, s.seconds_shortcut,
                                                    s.seconds_contact)] + [time.perf_counter() - t]
     progress(1.0, f"{motion.duration:.1f} s of motion with double grasp {len(tried)}")
@@ -109,48 +110,39 @@ def _empty(p: MotionParams, robot, tried: list, resolution: dict, failure: str) 
                   np.zeros(5, np.int64))
 
 
-def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, resolution: dict, planner: DoubleGraspPlanner) -> Motion:
-    """Time every piece, sample it, and pose the object and wrists at every sample."""
+def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, resolution: dict, planner: DoubleGraspPlanner,
+             rng: np.random.Generator) -> Motion:
+    """Smooth and sample the pieces (sampling.py), and pose the object and wrists at every sample."""
     robot = scene.robot
     arms = list(robot.spec.arm_names)
     vmax = np.minimum(np.asarray(robot.model.velocityLimit, float), p.max_velocity)
-    amax = np.full(robot.nq, p.max_acceleration)
-    dt = 1.0 / p.rate
-    qs, phase, holder, active, poses, ends = [scene.q_initial[None]], [0], [-1], [-1], [scene.object_initial[None]], []
+    smoother = Smoother(planner.validities, vmax, np.full(robot.nq, p.max_acceleration), p.smooth_attempts, p.smooth_checks,
+                        p.smooth_min_gain)
+    out = sample(pieces, smoother, rng, 1.0 / p.rate)
+    q = np.concatenate([scene.q_initial[None]] + out.q)
+    kept = out.pieces
+    owner = np.array([-1] + out.owner)
     data = robot.model.createData()
     palms = {a: robot.frame_id(robot.palm_frame(a)) for a in arms}
     mounts = [robot.frame_id(robot.spec.arm(a).hand.mount_frame) for a in arms]
-    wrists = []
-    for piece in pieces:
-        _, q = sample_polyline(piece.path, vmax, amax, dt)
-        s = piece.situation
-        for qi in q:
-            pin.framesForwardKinematics(robot.model, data, qi)
-            palm = data.oMf[palms[s.holder]].homogeneous if s.holder else None
-            poses.append(s.object_pose(palm)[None])
-            wrists.append([data.oMf[m].translation.copy() for m in mounts])
-        qs.append(q)
-        phase += [int(piece.phase)] * len(q)  # stored as the phase's integer
-        holder += [arms.index(s.holder) if s.holder else -1] * len(q)
-        active += [arms.index(piece.hand) if piece.hand else -1] * len(q)
-        ends.append(sum(len(x) for x in qs) - 1)
-    pin.framesForwardKinematics(robot.model, data, scene.q_initial)
-    wrists.insert(0, [data.oMf[m].translation.copy() for m in mounts])
-    q = np.concatenate(qs)
-    phase_arr = np.array(phase, np.int8)
-    grasped, exchanged, placed = (next((ends[i] for i, pc in enumerate(pieces) if (pc.phase, pc.part) == mark), None)
+    poses, wrists = [], []
+    for k, qi in enumerate(q):
+        pin.framesForwardKinematics(robot.model, data, qi)
+        s = kept[owner[k]].situation if k else None
+        palm = data.oMf[palms[s.holder]].homogeneous if s is not None and s.holder else None
+        poses.append(scene.object_initial if s is None else s.object_pose(palm))
+        wrists.append([data.oMf[m].translation.copy() for m in mounts])
+    phase_arr = np.array([0] + [int(kept[i].phase) for i in owner[1:]], np.int8)  # stored as the phase's integer
+    holder = [-1] + [arms.index(kept[i].situation.holder) if kept[i].situation.holder else -1 for i in owner[1:]]
+    active = [-1] + [arms.index(kept[i].hand) if kept[i].hand else -1 for i in owner[1:]]
+    ends = {i: int(np.flatnonzero(owner == i)[-1]) for i in set(owner[1:].tolist())}
+    grasped, exchanged, placed = (next((ends[i] for i, pc in enumerate(kept) if (pc.phase, pc.part) == mark), None)
                                   for mark in ((0, "closing"), (1, "closing"), (2, "set-down")))
     key = [0, grasped, placed if exchanged is None else exchanged, placed, len(q) - 1]  # a direct transfer: no exchange
+    dt = 1.0 / p.rate
     t = np.arange(len(q)) * dt
-    table = []
-    for i, st in enumerate(planner.stats):
-        sel = np.flatnonzero(phase_arr == i)
-        seg = q[sel[0] - 1 if sel[0] else 0: sel[-1] + 1] if len(sel) else q[:0]
-        table.append({"phase": PHASES[i], "nodes_planning": st.nodes_planning, "nodes_validating": st.nodes_validating,
-                      "edges_invalidated": st.edges_invalidated, "rrt_calls": st.rrt_calls, "searches": st.searches,
-                      "transit_checks": st.checks,
-                      "path_length": round(float(np.linalg.norm(np.diff(seg, axis=0), axis=1).sum()), 4),
-                      "duration": round(float(len(sel) * dt), 4)})
+    table = [_phase_row(i, st, q, phase_arr, dt, [pc for pc in pieces if pc.phase == i],
+                        sum(c for ph, c, _ in out.figures if ph == i)) for i, st in enumerate(planner.stats)]
     stages = []
     for row in table:
         stages += [{"stage": f"{row['phase']}: transit planning", "count": row["nodes_planning"], "note": f"{row['searches']} searches"},
@@ -160,9 +152,26 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
                    {"stage": f"{row['phase']}: shortcutting", "count": 0, "note": ""},
                    {"stage": f"{row['phase']}: approach, fingers, lift", "count": 0,
                     "note": f"path {row['path_length']:.2f} rad, {row['duration']:.2f} s"}]
-    stages.append({"stage": "timing and sampling", "count": len(q), "note": f"samples at {p.rate:g} Hz"})
-    return Motion(p.planner, len(tried) - 1, tried, table, arms, resolution, stages, "", t, q, phase_arr, np.concatenate(poses),
+    stages.append({"stage": "timing and sampling", "count": len(q),
+                   "note": f"{sum(k for _, _, k in out.figures)} parabolic shortcuts, samples at {p.rate:g} Hz"})
+    return Motion(p.planner, len(tried) - 1, tried, table, arms, resolution, stages, "", t, q, phase_arr, np.array(poses),
                   np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64))
+
+
+def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: list[Piece], smoothing_checks: int) -> dict:
+    """Table I's row of phase i: the transit figures, the phase's sampled path length, straight distance and duration,
+    and its transits' geometric length against the straight distance between their ends (before timing)."""
+    sel = np.flatnonzero(phase == i)
+    seg = q[sel[0] - 1 if sel[0] else 0: sel[-1] + 1] if len(sel) else q[:0]
+    transits = [pc.path for pc in pieces if pc.part in TRANSIT_PARTS]
+    return {"phase": PHASES[i], "nodes_planning": st.nodes_planning, "nodes_validating": st.nodes_validating,
+            "edges_invalidated": st.edges_invalidated, "rrt_calls": st.rrt_calls, "searches": st.searches,
+            "transit_checks": st.checks, "smoothing_checks": smoothing_checks,
+            "path_length": round(float(np.linalg.norm(np.diff(seg, axis=0), axis=1).sum()), 4),
+            "straight_distance": round(float(np.linalg.norm(seg[-1] - seg[0])), 4) if len(seg) else 0.0,
+            "transit_length": round(float(sum(np.linalg.norm(np.diff(x, axis=0), axis=1).sum() for x in transits)), 4),
+            "transit_straight": round(float(sum(np.linalg.norm(x[-1] - x[0]) for x in transits)), 4),
+            "duration": round(float(len(sel) * dt), 4)}
 
 
 def run(ctx: StepContext) -> StepOutput:

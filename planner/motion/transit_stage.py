@@ -17,7 +17,7 @@ from planner.collision.validity import Graded, Validity
 from planner.model.robot import Robot
 from planner.motion.graph import MotionGraph
 from planner.motion.phase import Phase
-from planner.motion.piece import Piece, PieceFailed, pairs_text
+from planner.motion.piece import TRANSIT_PARTS, Piece, PieceFailed, pairs_text
 from planner.motion.result import MotionParams
 from planner.motion.space import JointSpace
 from planner.motion.transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut, shortcut_vertices
@@ -48,7 +48,7 @@ class TransitStage:
         space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
         if not space.holds(q_goal):
             raise ValueError("transit ends must agree on every joint outside the ones it moves")
-        part = "transit" if arm is None else "arm away"
+        part = TRANSIT_PARTS[0] if arm is None else TRANSIT_PARTS[1]
         full, near = self.validities.of(situation, q_start, idx).transit_validities(q_start, q_goal)
         checkers = [full.seg] if near.seg is full.seg else [full.seg, near.seg]  # one when no pair is fitted
         before = sum(c.checks for c in checkers)

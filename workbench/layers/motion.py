@@ -51,7 +51,8 @@ def route_segments(result: Motion) -> tuple[np.ndarray, np.ndarray]:
 def table_one(result: Motion, seconds: list[float] | None) -> str:
     """Table I of the session as markdown, one column per phase: nodes added planning / validating, the seconds of
     planning, validating, reconnecting, shortcutting and contact motions (from the session record; '–' when absent),
-    edges invalidated, RRT calls, transit collision checks, path length and duration."""
+    edges invalidated, RRT calls, transit and smoothing collision checks, path length, straight distance between the
+    phase's ends and duration."""
     phases, per = result.phases, len(PHASE_SECONDS)
     secs = seconds if seconds and len(seconds) >= per * len(phases) else None
     rows = [("nodes planning", [plain(p["nodes_planning"]) for p in phases]),
@@ -61,7 +62,9 @@ def table_one(result: Motion, seconds: list[float] | None) -> str:
     rows += [("edges invalidated", [plain(p["edges_invalidated"]) for p in phases]),
              ("RRT calls", [plain(p["rrt_calls"]) for p in phases]),
              ("transit checks", [plain(p.get("transit_checks", "–")) for p in phases]),  # sessions before they were counted: '–'
+             ("smoothing checks", [plain(p.get("smoothing_checks", "–")) for p in phases]),
              ("length (rad)", [f"{p['path_length']:.2f}" for p in phases]),
+             ("straight (rad)", [f"{p['straight_distance']:.2f}" if "straight_distance" in p else "–" for p in phases]),
              ("duration (s)", [f"{p['duration']:.2f}" for p in phases])]
     head = "| | " + " | ".join(plain(p["phase"]) for p in phases) + " |\n|---|" + "---:|" * len(phases)
     return "\n".join([head, *(f"| {name} | " + " | ".join(cells) + " |" for name, cells in rows)])

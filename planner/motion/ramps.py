@@ -1,0 +1,119 @@
+"""Time-optimal parabolic ramps between two states (Hauser and Ng-Thow-Hing, ICRA 2010; KrisLibrary's ParabolicRamp).
+
+One joint goes from (x0, v0) to (x1, v1) with |v| <= vmax and |a| <= amax by a ramp: constant acceleration to a
+cruising velocity, cruise, constant acceleration to v1 (either ramp may be empty, the cruise too). Its shortest
+duration is the bang-bang profile (or the bang-cruise-bang one when the peak would pass vmax). Several joints move
+together: the slowest joint sets the duration T, and every other joint takes, for that T, the ramp of least
+acceleration. For a fixed T and acceleration a, the distance a ramp covers grows with the cruising velocity
+(its derivative is the cruise time), and a larger a admits every profile a smaller one does: both are found by
+bisection. Some T above a joint's shortest duration admit no ramp (Hauser's inoperative intervals, when v0 and v1
+point away from the goal): the duration is then lengthened step by step, and a ramp none admits is not made.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from planner.motion.trajectory import Trajectory
+
+TINY = 1e-12
+STRETCH = (1.0, 1.002, 1.01, 1.03, 1.07, 1.15, 1.3, 1.6, 2.0, 3.0)  # durations tried, times the slowest joint's shortest
+
+
+def min_times(d: np.ndarray, v0: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray) -> np.ndarray:
+    """Per joint, the shortest duration of a move by d from velocity v0 to v1 (inf where none: |v0| or |v1| > vmax)."""
+    best = np.full(np.shape(d), np.inf)
+    for s in (1.0, -1.0):
+        peak2 = s * amax * d + 0.5 * (v0**2 + v1**2)
+        peak = s * np.sqrt(np.maximum(peak2, 0.0))
+        t1, t2 = (peak - v0) / (s * amax), (peak - v1) / (s * amax)
+        ok = (peak2 >= 0.0) & (t1 >= -1e-12) & (t2 >= -1e-12)
+        bang = ok & (np.abs(peak) <= vmax)
+        c1, c2 = (s * vmax - v0) / (s * amax), (s * vmax - v1) / (s * amax)
+        cruise = (d - s * ((vmax**2 - v0**2) + (vmax**2 - v1**2)) / (2.0 * amax)) / (s * vmax)
+        capped = ok & ~bang & (cruise >= -1e-12) & (c1 >= -1e-12) & (c2 >= -1e-12)
+        best = np.minimum(best, np.where(bang, t1 + t2, np.where(capped, c1 + np.maximum(cruise, 0.0) + c2, np.inf)))
+    return np.where((np.abs(v0) > vmax * (1 + 1e-9)) | (np.abs(v1) > vmax * (1 + 1e-9)), np.inf, best)
+
+
+def _distance(vc: np.ndarray, v0: np.ndarray, v1: np.ndarray, a: np.ndarray, T: float) -> np.ndarray:
+    """The distance of the ramp of duration T, acceleration magnitude a, cruising at vc."""
+    t1, t2 = np.abs(vc - v0) / a, np.abs(v1 - vc) / a
+    return 0.5 * (v0 + vc) * t1 + vc * (T - t1 - t2) + 0.5 * (vc + v1) * t2
+
+
+def _cruise_range(v0: np.ndarray, v1: np.ndarray, vmax: np.ndarray, a: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cruising velocities a ramp of duration T and acceleration a can reach and leave in time, within vmax."""
+    return np.maximum(0.5 * (v0 + v1 - a * T), -vmax), np.minimum(0.5 * (v0 + v1 + a * T), vmax)
+
+
+def _reaches(d, v0, v1, vmax, a, T) -> np.ndarray:
+    lo, hi = _cruise_range(v0, v1, vmax, a, T)
+    tol = 1e-10 * (1.0 + np.abs(d))
+    return (lo <= hi + 1e-12) & (_distance(lo, v0, v1, a, T) <= d + tol) & (d - tol <= _distance(hi, v0, v1, a, T))
+
+
+def fixed_time(d: np.ndarray, v0: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+               T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(acceleration, cruising velocity, feasible) per joint: the least-acceleration ramp of duration T."""
+    still = (np.abs(v1 - v0) < TINY) & (np.abs(d - v0 * T) < 1e-12)  # constant velocity already
+    ok = still | _reaches(d, v0, v1, vmax, amax, T)
+    lo, hi = np.maximum(np.abs(v1 - v0) / T, TINY), amax.astype(float).copy()
+    for _ in range(24):  # hi stays feasible: a little above the least acceleration
+        mid = 0.5 * (lo + hi)
+        good = _reaches(d, v0, v1, vmax, mid, T)
+        hi, lo = np.where(good, mid, hi), np.where(good, lo, mid)
+    a = hi
+    vlo, vhi = _cruise_range(v0, v1, vmax, a, T)
+    for _ in range(42):  # to ~1e-12 of the velocity range: the end position to ~1e-11
+        mid = 0.5 * (vlo + vhi)
+        short = _distance(mid, v0, v1, a, T) < d
+        vlo, vhi = np.where(short, mid, vlo), np.where(short, vhi, mid)
+    vc = 0.5 * (vlo + vhi)
+    return np.where(still, 0.0, a), np.where(still, v0, vc), ok
+
+
+def ramp(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+         within: float = np.inf) -> Trajectory | None:
+    """The synchronised ramp from (q0, v0) to (q1, v1): duration set by the slowest joint (see the module); None when
+    no duration tried admits a ramp for every joint, or none shorter than `within`."""
+    d = q1 - q0
+    fastest = float(np.max(min_times(d, v0, v1, vmax, amax), initial=0.0))
+    if not fastest < within or fastest <= TINY:  # too slow, or the same state: nothing to move
+        return None
+    for stretch in STRETCH:
+        if fastest * stretch >= within:
+            return None
+        T = fastest * stretch
+        a, vc, ok = fixed_time(d, v0, v1, vmax, amax, T)
+        if ok.all():
+            return _pieces(q0, v0, q1, v1, a, vc, T)
+    return None
+
+
+def _pieces(q0, v0, q1, v1, a, vc, T: float) -> Trajectory:
+    """The ramps (per joint: accelerate to vc, cruise, accelerate to v1) as one piecewise-parabolic trajectory."""
+    safe = np.where(a > 0, a, 1.0)
+    t1 = np.where(a > 0, np.abs(vc - v0) / safe, 0.0)
+    t2 = np.where(a > 0, np.abs(v1 - vc) / safe, 0.0)
+    s1, s2 = np.sign(vc - v0) * a, np.sign(v1 - vc) * a
+    cuts = np.unique(np.clip(np.concatenate([[0.0, T], t1, T - t2]), 0.0, T))
+    cuts = cuts[np.concatenate([[True], np.diff(cuts) > 1e-9])]
+    cuts[-1] = T
+    starts = cuts[:-1]
+    mids = 0.5 * (cuts[:-1] + cuts[1:])
+    pos0 = q0 + v0 * t1 + 0.5 * s1 * t1**2  # at the end of the first ramp
+
+    def state(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        tau = tau[:, None]
+        first = tau < t1
+        last = tau > T - t2
+        late = tau - (T - t2)
+        q = np.where(first, q0 + v0 * tau + 0.5 * s1 * tau**2,
+                     np.where(last, pos0 + vc * (T - t2 - t1) + vc * late + 0.5 * s2 * late**2, pos0 + vc * (tau - t1)))
+        v = np.where(first, v0 + s1 * tau, np.where(last, vc + s2 * late, vc))
+        return q, v
+
+    q, v = state(starts)
+    tm = mids[:, None]
+    acc = np.where(tm < t1, s1, np.where(tm > T - t2, s2, 0.0))
+    return Trajectory(cuts, q, v, acc, q1.copy())

@@ -1,0 +1,51 @@
+"""The motion's pieces as one sampled trajectory: each run smoothed (smoothing.py; the runs at once in forked workers,
+each with its own random stream drawn from the plan's), slowed to a whole number of sample periods, and read at the
+sampling rate.
+
+Slowing a run by the fraction of a period it needs keeps every limit and puts its ends, where the robot rests
+(a hand closed, the object set down), on samples; every sample lies on the checked continuous motion. Each sample
+belongs to the piece whose (shortcut-mapped) time span holds it: its phase, the object's situation, the working hand.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.core.forked import forked_map
+from planner.motion.piece import Piece
+from planner.motion.smoothing import Smoother, runs
+
+
+@dataclass
+class Sampled:
+    """Configurations after the first, the index into `pieces` of each one's piece, and the smoothing's figures per
+    run (its first piece's phase, collision checks, shortcuts kept)."""
+
+    q: list = field(default_factory=list)
+    owner: list = field(default_factory=list)
+    pieces: list = field(default_factory=list)
+    figures: list = field(default_factory=list)
+
+
+def sample(pieces: list[Piece], smoother: Smoother, rng: np.random.Generator, dt: float) -> Sampled:
+    """Every run smoothed, slowed to whole periods of dt and sampled (see the module)."""
+    out = Sampled()
+    grouped = runs(pieces)
+    seeds = rng.integers(2**63, size=len(grouped))
+    for smoothed in forked_map(lambda i: smoother.smooth(grouped[i], np.random.default_rng(seeds[i])), range(len(grouped))):
+        if smoothed.trajectory is None:
+            continue
+        n = max(1, math.ceil(smoothed.trajectory.duration / dt - 1e-9))
+        factor = n * dt / smoothed.trajectory.duration
+        traj, ends = smoothed.trajectory.scaled(factor), smoothed.ends * factor
+        times = np.arange(1, n + 1) * dt
+        q = traj.positions(times)
+        q[-1] = traj.end
+        owner = np.minimum(np.searchsorted(ends, times - 1e-9, side="left"), len(smoothed.pieces) - 1)
+        out.q.append(q)
+        out.owner += (owner + len(out.pieces)).tolist()
+        out.pieces += smoothed.pieces
+        out.figures.append((smoothed.pieces[0].phase, smoothed.checks, smoothed.shortcuts))
+    return out
