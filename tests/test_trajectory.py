@@ -127,7 +127,7 @@ def test_a_curve_is_checked_at_least_as_densely_as_the_straight_segment_it_follo
     assert seg.curve_first_hit(curve, "env") is None  # the arm clear of the obstacles: every check made
     curve_checks = seg.checks - before
     straight = int(seg.steps(qa, qb, "env")[0])
-    assert straight <= curve_checks <= 2 * straight + 2  # the speed bound is loose only while accelerating
+    assert straight <= curve_checks <= 1.25 * straight + 2  # the speed bound is loose only while accelerating
 
 
 def test_curves_the_check_accepts_are_free_by_the_oracle(default_scene, transit_validity):

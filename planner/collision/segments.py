@@ -186,11 +186,19 @@ class SegmentChecker:
         return self._first_hit(n, lambda s: q[int(round(s * (grid - 1)))], subset, ends)
 
     def _leading(self, subset: str, moving: np.ndarray) -> np.ndarray:
-        """The subset's distinct displacement weights over the moving joints (a few hundred of a thousand rows), once
-        per set of joints."""
+        """The subset's displacement weights over the moving joints without the rows another row bounds everywhere
+        (speeds are >= 0: a bounded row never gives the largest displacement): a handful of a thousand, once per set of
+        joints."""
         key = (subset, moving.tobytes())
         if key not in self._leading_rows:
-            self._leading_rows[key] = np.unique(self.weights(subset)[:, moving], axis=0)
+            rows = np.unique(self.weights(subset)[:, moving], axis=0)
+            rows = rows[np.argsort(-rows.sum(axis=1), kind="stable")]
+            kept, bounded = [], np.zeros(len(rows), dtype=bool)
+            for k in range(len(rows)):
+                if not bounded[k]:
+                    kept.append(k)
+                    bounded |= np.all(rows <= rows[k], axis=1)
+            self._leading_rows[key] = rows[kept]
         return self._leading_rows[key]
 
     def _grid(self, n: int) -> int:

@@ -77,14 +77,19 @@ def situation_model(cm: CollisionModel, shape: Geometry, situation: Situation,
 def for_motion(base: CollisionModel, moved_hands: tuple[str, ...], moving: np.ndarray) -> CollisionModel:
     """A situation's model (see situation_base) for motions of the configuration indices `moving`, the hands
     `moved_hands` away from the roadmap's hold configuration: 'moving' the pairs whose relative pose they change, 'changed'
-    those of them the offline roadmap did not check (see the module). The geometry is the base's, so one collision data
+    those of them the offline roadmap did not check (see the module); 'moving_inner' those between two links of one hand
+    (fingers closing come as near their palm as a grasp needs), 'moving_outer' the others. The geometry is the base's, so one collision data
     serves all of a situation's motions (see CollisionChecker)."""
     stands_in = base.twins >= 0 if base.twins is not None else np.zeros(len(base.ends), dtype=bool)
     changes = base.relative_joints()[:, moving].any(axis=1) & ~stands_in
     moved = np.concatenate([finger_geometries(base, arm) for arm in moved_hands] + [np.zeros(0, np.int64)])
     changed = np.isin(base.ends, moved).any(axis=1)
     changed[base.subsets[OBJECT_PAIRS]] = True
-    return base.with_subsets({"moving": np.flatnonzero(changes), "changed": np.flatnonzero(changes & changed)})
+    parts = np.array(base.parts + ("",) * (len(base.geometry.geometryObjects) - base.n_robot_geoms))
+    a, b = parts[base.ends[:, 0]], parts[base.ends[:, 1]]
+    inner = (a == b) & np.char.endswith(a.astype(str), "_hand")  # a hand's own links: only its fingers move them
+    return base.with_subsets({"moving": np.flatnonzero(changes), "changed": np.flatnonzero(changes & changed),
+                              "moving_outer": np.flatnonzero(changes & ~inner), "moving_inner": np.flatnonzero(changes & inner)})
 
 
 def situation_base(cm: CollisionModel, shape: Geometry, situation: Situation, hull: Geometry | None = None) -> CollisionModel:

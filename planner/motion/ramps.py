@@ -4,9 +4,7 @@ One joint goes from (x0, v0) to (x1, v1) with |v| <= vmax and |a| <= amax by a r
 cruising velocity, cruise, constant acceleration to v1 (either ramp may be empty, the cruise too). Its shortest
 duration is the bang-bang profile (or the bang-cruise-bang one when the peak would pass vmax). Several joints move
 together: the slowest joint sets the duration T, and every other joint takes, for that T, the ramp of least
-acceleration. For a fixed T and acceleration a, the distance a ramp covers grows with the cruising velocity
-(its derivative is the cruise time), and a larger a admits every profile a smaller one does: both are found by
-bisection. Some T above a joint's shortest duration admit no ramp (Hauser's inoperative intervals, when v0 and v1
+acceleration (closed forms, see fixed_time). Some T above a joint's shortest duration admit no ramp (Hauser's inoperative intervals, when v0 and v1
 point away from the goal): the duration is then lengthened step by step, and a ramp none admits is not made.
 """
 from __future__ import annotations
@@ -35,40 +33,26 @@ def min_times(d: np.ndarray, v0: np.ndarray, v1: np.ndarray, vmax: np.ndarray, a
     return np.where((np.abs(v0) > vmax * (1 + 1e-9)) | (np.abs(v1) > vmax * (1 + 1e-9)), np.inf, best)
 
 
-def _distance(vc: np.ndarray, v0: np.ndarray, v1: np.ndarray, a: np.ndarray, T: float) -> np.ndarray:
-    """The distance of the ramp of duration T, acceleration magnitude a, cruising at vc."""
-    t1, t2 = np.abs(vc - v0) / a, np.abs(v1 - vc) / a
-    return 0.5 * (v0 + vc) * t1 + vc * (T - t1 - t2) + 0.5 * (vc + v1) * t2
-
-
-def _cruise_range(v0: np.ndarray, v1: np.ndarray, vmax: np.ndarray, a: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """The cruising velocities a ramp of duration T and acceleration a can reach and leave in time, within vmax."""
-    return np.maximum(0.5 * (v0 + v1 - a * T), -vmax), np.minimum(0.5 * (v0 + v1 + a * T), vmax)
-
-
-def _reaches(d, v0, v1, vmax, a, T) -> np.ndarray:
-    lo, hi = _cruise_range(v0, v1, vmax, a, T)
-    tol = 1e-10 * (1.0 + np.abs(d))
-    return (lo <= hi + 1e-12) & (_distance(lo, v0, v1, a, T) <= d + tol) & (d - tol <= _distance(hi, v0, v1, a, T))
-
-
 def fixed_time(d: np.ndarray, v0: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
                T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(acceleration, cruising velocity, feasible) per joint: the least-acceleration ramp of duration T."""
-    still = (np.abs(v1 - v0) < TINY) & (np.abs(d - v0 * T) < 1e-12)  # constant velocity already
-    ok = still | _reaches(d, v0, v1, vmax, amax, T)
-    lo, hi = np.maximum(np.abs(v1 - v0) / T, TINY), amax.astype(float).copy()
-    for _ in range(24):  # hi stays feasible: a little above the least acceleration
-        mid = 0.5 * (lo + hi)
-        good = _reaches(d, v0, v1, vmax, mid, T)
-        hi, lo = np.where(good, mid, hi), np.where(good, lo, mid)
-    a = hi
-    vlo, vhi = _cruise_range(v0, v1, vmax, a, T)
-    for _ in range(42):  # to ~1e-12 of the velocity range: the end position to ~1e-11
-        mid = 0.5 * (vlo + vhi)
-        short = _distance(mid, v0, v1, a, T) < d
-        vlo, vhi = np.where(short, mid, vlo), np.where(short, vhi, mid)
-    vc = 0.5 * (vlo + vhi)
+    """(acceleration, cruising velocity, feasible) per joint: the least-acceleration ramp of duration T, in closed form.
+
+    Without a cruise the two ramps meet at vc = (v0 + v1 + sign a T) / 2, and the distance covered gives a quadratic in
+    a with one root >= 0 (sign: up when d exceeds what constant acceleration from v0 to v1 covers, (v0 + v1) T / 2,
+    down otherwise). Where that vc passes vmax, the ramp cruises at sign vmax and a follows from the distance."""
+    s, dv = v0 + v1, v0 - v1
+    sign = np.where(d >= 0.5 * s * T, 1.0, -1.0)
+    b = sign * (4.0 * d - 2.0 * s * T)
+    a = (b + np.sqrt(b * b + 4.0 * T * T * dv * dv)) / (2.0 * T * T)
+    vc = 0.5 * (s + sign * a * T)
+    capped = np.abs(vc) > vmax
+    room = vmax * T - sign * d  # what a cruise at sign vmax would cover beyond d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(capped, ((vmax - sign * v0) ** 2 + (vmax - sign * v1) ** 2) / (2.0 * room), a)
+        vc = np.where(capped, sign * vmax, vc)
+        ramps = (np.abs(vc - v0) + np.abs(v1 - vc)) / a
+    still = (a <= TINY) & (np.abs(dv) < TINY)  # constant velocity already
+    ok = still | ((a <= amax * (1 + 1e-9)) & (~capped | (room > 0)) & (ramps <= T * (1 + 1e-9)))
     return np.where(still, 0.0, a), np.where(still, v0, vc), ok
 
 

@@ -45,11 +45,12 @@ class MotionParams:
     rrt_step: float = bounded(0.5, 0.01, 10.0, "rad")  # RRTConnect's range (longest extension, joint-space distance)
     # random shortcuts per transit, after the greedy ones between its vertices (measured on seeds 0-9: 16 of them shortened the
     # joint-space length by a sixth and the duration by 4%, for 10% more checks)
-    shortcut_attempts: int = bounded(0, 0, 10000, "shortcuts")
+    shortcut_attempts: int = bounded(30, 0, 10000, "shortcuts")
     shortcut_min_gain: float = bounded(0.1, 0.0, 10.0, "rad")  # a shortcut shortening the path (joint-space length) by less is not checked
-    # timing: parabolic shortcuts tried per run of the motion (between two rests), each checked before it is kept ...
-    smooth_attempts: int = bounded(300, 0, 100000, "shortcuts")
-    smooth_checks: int = bounded(5000, 0, 10000000, "collision checks")  # ... until the run's checks reach this
+    # timing: random parabolic shortcuts tried over the whole motion, each checked before it is kept, and the collision checks
+    # all the smoothing may make (shared among the runs between two rests in proportion to how long they take before it)
+    smooth_attempts: int = bounded(1200, 0, 1000000, "shortcuts")
+    smooth_checks: int = bounded(14000, 0, 100000000, "collision checks")
     smooth_min_gain: float = bounded(0.02, 0.0, 10.0, "s")  # a parabolic shortcut saving less time is not checked
     # transit: an end the graph cannot reach is reconnected to this many of its nearest valid nodes
     goal_nodes: int = bounded(16, 1, 1000, "nodes")

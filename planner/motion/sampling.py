@@ -29,12 +29,19 @@ class Sampled:
     figures: list = field(default_factory=list)
 
 
-def sample(pieces: list[Piece], smoother: Smoother, rng: np.random.Generator, dt: float) -> Sampled:
-    """Every run smoothed, slowed to whole periods of dt and sampled (see the module)."""
+def sample(pieces: list[Piece], smoother: Smoother, rng: np.random.Generator, dt: float, attempts: int, budget: int) -> Sampled:
+    """Every run smoothed, slowed to whole periods of dt and sampled (see the module). The runs share `attempts` random
+    shortcuts and a `budget` of collision checks in proportion to how long they take before smoothing."""
     out = Sampled()
     grouped = runs(pieces)
     seeds = rng.integers(2**63, size=len(grouped))
-    for smoothed in forked_map(lambda i: smoother.smooth(grouped[i], np.random.default_rng(seeds[i])), range(len(grouped))):
+    share = np.array([smoother.rest_to_rest(run) for run in grouped])
+    share = share / max(share.sum(), 1e-12)
+
+    def smooth(i: int):
+        return smoother.smooth(grouped[i], np.random.default_rng(seeds[i]), int(attempts * share[i]), int(budget * share[i]))
+
+    for smoothed in forked_map(smooth, range(len(grouped))):
         if smoothed.trajectory is None:
             continue
         n = max(1, math.ceil(smoothed.trajectory.duration / dt - 1e-9))

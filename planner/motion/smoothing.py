@@ -25,6 +25,7 @@ from planner.motion.ramps import ramp
 from planner.motion.trajectory import Trajectory, rest_to_rest
 from planner.motion.validities import Validities
 
+LEAVING, REACHING = ("lift", "retreat"), ("approach", "set-down")  # contact motions starting / ending at the object
 RESTS = ("closing", "opening")  # a hand closes on the object or lets go of it: the robot rests before and after
 
 
@@ -60,32 +61,44 @@ class SmoothedRun:
 class Smoother:
     """Smooths runs of pieces with the checks of their situations (`validities`), under per-joint limits."""
 
-    def __init__(self, validities: Validities, vmax: np.ndarray, amax: np.ndarray, attempts: int, budget: int,
-                 min_gain: float):
-        self.validities, self.vmax, self.amax = validities, vmax, amax
-        self.attempts, self.budget, self.min_gain = attempts, budget, min_gain
+    def __init__(self, validities: Validities, vmax: np.ndarray, amax: np.ndarray, min_gain: float):
+        self.validities, self.vmax, self.amax, self.min_gain = validities, vmax, amax, min_gain
 
-    def own(self, piece: Piece) -> tuple[Validity, ...]:
-        """The validities a piece was checked with: a transit's (full, near: paddings fitted to its ends), a contact
-        motion's."""
+    def rest_to_rest(self, pieces: list[Piece]) -> float:
+        """How long the pieces take timed rest to rest at every vertex (before smoothing)."""
+        return sum(t.duration for t in (rest_to_rest(p.path, self.vmax, self.amax) for p in pieces) if t is not None)
+
+    def own(self, piece: Piece, moving: np.ndarray) -> tuple[Validity, ...]:
+        """The validity a piece was checked with (a transit's, its paddings fitted to its ends; a contact motion's),
+        over the pairs the joints `moving` change."""
         path = piece.path
-        checks = self.validities.of(piece.situation, path[0], np.flatnonzero(np.ptp(path, axis=0) > 0))
+        checks = self.validities.of(piece.situation, path[0], moving)
         if piece.part in TRANSIT_PARTS:
             return checks.transit_validities(path[0], path[-1])[1:]
         return (checks.checked(self.validities.contact).validity,)
 
-    def blend(self, pieces: list[Piece], strict: Situation) -> tuple[Validity, ...]:
+    def blend(self, pieces: list[Piece], strict: Situation, moving: np.ndarray) -> tuple[Validity, ...]:
         """The validity of ramps across pieces: the transit profile in their situation without exceptions (`strict`),
-        over the joints any of them moves, its paddings fitted to where the first piece starts and the last ends."""
-        moving = np.flatnonzero(np.ptp(np.vstack([p.path for p in pieces]), axis=0) > 0)
-        qa, qb = pieces[0].path[0], pieces[-1].path[-1]
-        return self.validities.of(strict, qa, moving).transit_validities(qa, qb)[1:]
+        over the pairs the joints `moving` change, its paddings fitted to the clearances of the span's ends as a transit sees
+        them: where the span begins with a motion leaving the object (lift, retreat), the end of that motion; where it
+        ends with one reaching it (approach, set-down), its start. A ramp nearer the object than those fails: the
+        contact motion keeps its straight line there. Fingers moving (a hand shaped, or opened at the end, while the
+        arms move) keep their hand's own links apart as a finger motion does: at the contact profile."""
+        first, last = pieces[0], pieces[-1]
+        qa = first.path[-1] if first.part in LEAVING else first.path[0]
+        qb = last.path[0] if last.part in REACHING else last.path[-1]
+        checks = self.validities.of(strict, qa, moving)
+        outer = checks.transit_validities(qa, qb)[1].on("moving_outer")
+        if not len(checks.model.subsets["moving_inner"]):
+            return (outer,)
+        return outer, checks.validity(self.validities.contact).on("moving_inner")
 
-    def smooth(self, pieces: list[Piece], rng: np.random.Generator) -> SmoothedRun:
+    def smooth(self, pieces: list[Piece], rng: np.random.Generator, attempts: int, budget: int) -> SmoothedRun:
         """The run's pieces timed rest to rest at every vertex, then shortened by checked ramps in three passes: from
         the first vertex to the farthest it reaches by a rest-to-rest ramp, and on from there (the path's big
         detours, each ramp checked once); around each vertex left (from halfway along the segment before to halfway
-        along the one after: short ramps, few checks, no stop left where one is valid); between random times."""
+        along the one after: short ramps, few checks, no stop left where one is valid); between random times, at most
+        `attempts` of them. Each pass stops once the run's collision checks reach `budget`."""
         timed = [(p, rest_to_rest(p.path, self.vmax, self.amax)) for p in pieces]
         timed = [(p, t) for p, t in timed if t is not None]
         if not timed:
@@ -95,18 +108,18 @@ class Smoother:
         run.marks = np.array([0.0] + [float(t) for t, v in zip(run.traj.t[1:-1], run.traj.v[1:]) if not v.any()]
                              + [run.traj.duration])  # the vertices, where the robot rests
         i = 0
-        while i < len(run.marks) - 2 and run.checks < self.budget:
+        while i < len(run.marks) - 2 and run.checks < budget:
             j = next((j for j in range(len(run.marks) - 1, i + 1, -1) if run.attempt(run.marks[i], run.marks[j])), None)
             if j is not None:
                 run.marks = np.delete(run.marks, np.arange(i + 1, j))
             i += 1
         for k in range(1, len(run.marks) - 1):
-            if run.checks >= self.budget:
+            if run.checks >= budget:
                 break
             m = run.marks
             run.attempt(0.5 * (m[k - 1] + m[k]), 0.5 * (m[k] + m[k + 1]))
-        for _ in range(self.attempts):
-            if run.checks >= self.budget:
+        for _ in range(attempts):
+            if run.checks >= budget:
                 break
             run.attempt(*np.sort(rng.uniform(0.0, run.traj.duration, 2)))
         return SmoothedRun(run.pieces, run.traj, run.ends, run.checks, run.shortcuts)
@@ -118,23 +131,32 @@ class _Run:
 
     def __init__(self, smoother: Smoother, pieces: list[Piece], traj: Trajectory, ends: np.ndarray):
         self.smoother, self.pieces, self.traj, self.ends = smoother, pieces, traj, ends
-        self.own: list[tuple[Validity, ...] | None] = [None] * len(pieces)
-        self.blends: dict[tuple[int, int], tuple[Validity, ...]] = {}
+        self.moves = np.array([np.ptp(p.path, axis=0) > 0 for p in pieces])  # the joints each piece moves
+        robot = smoother.validities.robot
+        self.fingers = np.isin(np.arange(robot.nq), np.concatenate([robot.hand_idx[a] for a in robot.spec.arm_names]))
+        self.checks_of: dict[tuple[int, int, bool, bytes], tuple[Validity, ...]] = {}
         self.strict = next((p.situation for p in pieces if not p.situation.touching and not p.situation.support),
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.checks = self.shortcuts = 0
         self.marks = np.zeros(0)
 
-    def validities(self, t1: float, t2: float) -> tuple[Validity, ...]:
-        """What checks a ramp from t1 to t2: its piece's own validity, or the blend of the pieces it spans."""
+    def validities(self, t1: float, t2: float, ramp_moves: np.ndarray) -> tuple[Validity, ...] | None:
+        """What checks a ramp from t1 to t2: its piece's own validity, or the blend of the pieces it spans (also for one
+        piece when the ramp moves joints it does not: a shortcut made before may carry the other arm's motion into an
+        approach), over the pairs changed by the joints their pieces move and the ramp does. None when the ramp would
+        move fingers in a contact motion that keeps them still (a hand is shaped before it approaches)."""
         i, j = (min(int(np.searchsorted(self.ends, t, side="left")), len(self.pieces) - 1) for t in (t1, t2))
-        if i == j:
-            if self.own[i] is None:
-                self.own[i] = self.smoother.own(self.pieces[i])
-            return self.own[i]
-        if (i, j) not in self.blends:
-            self.blends[i, j] = self.smoother.blend(self.pieces[i: j + 1], self.strict)
-        return self.blends[i, j]
+        if any(p.part in LEAVING + REACHING and np.any(ramp_moves & self.fingers & ~m)
+               for p, m in zip(self.pieces[i: j + 1], self.moves[i: j + 1])):
+            return None
+        spanned = self.moves[i: j + 1].any(axis=0)
+        moving = np.flatnonzero(spanned | ramp_moves)
+        own = i == j and not np.any(ramp_moves & ~spanned)  # moving more than its piece: checked as a blend
+        key = (i, j, own, moving.tobytes())
+        if key not in self.checks_of:
+            self.checks_of[key] = (self.smoother.own(self.pieces[i], moving) if own else
+                                   self.smoother.blend(self.pieces[i: j + 1], self.strict, moving))
+        return self.checks_of[key]
 
     def attempt(self, t1: float, t2: float) -> bool:
         """Whether the ramp from the state at t1 to the one at t2 is faster and valid; then it replaces that span, and
@@ -146,7 +168,9 @@ class _Run:
         shortcut = ramp(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
         if shortcut is None:
             return False
-        validities = self.validities(t1, t2)
+        validities = self.validities(t1, t2, shortcut.speed_bounds()[1].max(axis=0) > 0)
+        if validities is None:
+            return False
         before = sum(v.checks for v in validities)
         ok = all(v.curve_valid(shortcut) for v in validities)
         self.checks += sum(v.checks for v in validities) - before

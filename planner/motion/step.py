@@ -116,9 +116,8 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
     robot = scene.robot
     arms = list(robot.spec.arm_names)
     vmax = np.minimum(np.asarray(robot.model.velocityLimit, float), p.max_velocity)
-    smoother = Smoother(planner.validities, vmax, np.full(robot.nq, p.max_acceleration), p.smooth_attempts, p.smooth_checks,
-                        p.smooth_min_gain)
-    out = sample(pieces, smoother, rng, 1.0 / p.rate)
+    smoother = Smoother(planner.validities, vmax, np.full(robot.nq, p.max_acceleration), p.smooth_min_gain)
+    out = sample(pieces, smoother, rng, 1.0 / p.rate, p.smooth_attempts, p.smooth_checks)
     q = np.concatenate([scene.q_initial[None]] + out.q)
     kept = out.pieces
     owner = np.array([-1] + out.owner)

@@ -44,12 +44,17 @@ class Trajectory:
     def positions(self, times: np.ndarray) -> np.ndarray:
         return self.states(times)[0]
 
-    def speed_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(breakpoints, (K, n) per piece and joint the largest speed in it): velocity is linear in a piece, so its
-        largest magnitude is at one of the piece's ends. A joint moves at most bound x time within a piece; the
-        collision check of a curve spaces its checks by this (see segments.py)."""
-        h = np.diff(self.t)[:, None]
-        return self.t, np.maximum(np.abs(self.v), np.abs(self.v + self.a * h))
+    def speed_bounds(self, split: int = 4) -> tuple[np.ndarray, np.ndarray]:
+        """(breakpoints, (K * split, n) per part and joint the largest speed in it), each piece cut in `split` equal
+        parts: velocity is linear in a piece, so its largest magnitude in a part is at one of the part's ends. A joint
+        moves at most bound x time within a part; the collision check of a curve spaces its checks by this (see
+        segments.py), which overcounts a joint accelerating from rest by (split + 1) / split."""
+        h = np.diff(self.t)
+        frac = np.arange(split + 1) / split
+        t = np.append((self.t[:-1, None] + h[:, None] * frac[None, :-1]).ravel(), self.t[-1])
+        v = self.v[:, None, :] + self.a[:, None, :] * (h[:, None] * frac)[:, :, None]  # (K, split + 1, n)
+        bound = np.maximum(np.abs(v[:, :-1]), np.abs(v[:, 1:]))
+        return t, bound.reshape(-1, self.v.shape[1])
 
     def scaled(self, factor: float) -> "Trajectory":
         """The same path slowed by `factor` >= 1 (velocities / factor, accelerations / factor^2): limits still hold."""
