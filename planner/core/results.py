@@ -3,7 +3,8 @@
 Fields declared with `array(dtype, shape)` go to the step's `.npz` (shape entries: an int, or a
 name like "n" shared between fields (the session fixes "nq" to the robot's DoF), or None for any); every other field must be JSON-able
 (numbers, strings, bools, lists, dicts) and goes to the step's `.json`. Loading checks every
-array's dtype and shape and every JSON field's presence, with errors naming the file and field.
+array's dtype and shape and every JSON field's presence, with errors naming the file and field; a JSON field declared
+with a default was added later, and a file written before it may lack it (it loads with the default).
 """
 from __future__ import annotations
 
@@ -228,9 +229,10 @@ def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | No
         if _is_array(f):
             values[f.name] = _finite(arrays[f.name], npz_path, f.name)
         else:
-            if f.name not in rest:
+            if f.name in rest:
+                values[f.name] = frozen_json(rest[f.name])
+            elif f.default is dataclasses.MISSING:
                 raise InputError(json_path, f.name, "missing field")
-            values[f.name] = frozen_json(rest[f.name])
     unknown = set(rest) - set(values)
     if unknown:
         raise InputError(json_path, sorted(unknown)[0], f"unknown field (this version of {cls.__name__} does not have it)")

@@ -106,7 +106,7 @@ def _empty(p: MotionParams, robot, tried: list, resolution: dict, failure: str) 
     nq = robot.nq
     return Motion(p.planner, -1, tried, [], list(robot.spec.arm_names), resolution, [], failure, np.zeros(0), np.zeros((0, nq)),
                   np.zeros(0, np.int8), np.zeros((0, 4, 4)), np.zeros(0, np.int8), np.zeros(0, np.int8), np.zeros((0, 2, 3)),
-                  np.zeros(5, np.int64))
+                  np.zeros(5, np.int64), tuple(robot.joint_names()))
 
 
 def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, resolution: dict, planner: DoubleGraspPlanner) -> Motion:
@@ -162,7 +162,8 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
                     "note": f"path {row['path_length']:.2f} rad, {row['duration']:.2f} s"}]
     stages.append({"stage": "timing and sampling", "count": len(q), "note": f"samples at {p.rate:g} Hz"})
     return Motion(p.planner, len(tried) - 1, tried, table, arms, resolution, stages, "", t, q, phase_arr, np.concatenate(poses),
-                  np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64))
+                  np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64),
+                  tuple(robot.joint_names()))
 
 
 def run(ctx: StepContext) -> StepOutput:
