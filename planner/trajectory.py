@@ -1,5 +1,5 @@
 """A session's motion as a trajectory file another tool reads: JSON in the shape of a ROS `trajectory_msgs/JointTrajectory`
-(plus regrasp's own fields beside it), or CSV with a header. docs/trajectory.md describes both formats.
+(plus regrasp's own fields beside it), or CSV with a header. docs/sessions.md describes both formats.
 
 Every sample of the motion is one point: its time, the positions (q, in the robot model's joint order), the velocities
 (central finite differences of the samples: the motion result stores none), the phase, the arm holding the object and

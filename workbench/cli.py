@@ -76,7 +76,7 @@ def add_workbench_commands(line: CommandLine) -> None:
     e.add("session", metavar="SESSION", help="session folder")
     e.add("--html", metavar="FILE", help="HTML file to write (.html)")
     e.add("--trajectory", metavar="FILE", help="trajectory file to write: .json (a ROS JointTrajectory and more) or .csv "
-                                                "(docs/trajectory.md)")
+                                                "(docs/sessions.md)")
     e.add("--force", action="store_true", help="replace files that exist")
     s = line.command("screenshot", "picture the workbench replaying a session (the README's image), with headless chromium",
                      _cmd_screenshot)

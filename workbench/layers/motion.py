@@ -157,7 +157,7 @@ class MotionLayer(StepLayer):
                                                         "file that plays offline (10 frames a second at most)")
                     self.trajectory_buttons = gui.add_button_group("Trajectory", TRAJECTORY_FORMATS, hint=(
                         "Download the motion as a trajectory file (joint names, time, positions, velocities, phase, holder, "
-                        "object pose): JSON shaped as a ROS JointTrajectory, or CSV (docs/trajectory.md)"))
+                        "object pose): JSON shaped as a ROS JointTrajectory, or CSV (docs/sessions.md)"))
             gui.add_markdown(self.summary(result))
         if self.timeline is not None and self.play_button is not None and self.jump is not None:
             self.timeline.on_update(lambda e: self.show(int(e.target.value)))
