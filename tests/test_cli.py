@@ -169,7 +169,7 @@ def test_params_lists_every_parameter_with_type_and_default():
     ("motion.rrt_motions=fast", "parameter rrt_motions expects int, got 'fast'"),
     ("exchange.keep=2.5", "parameter keep expects int"),
     ("roadmap.radius=NaN", "parameter radius expects a finite number"),
-    ("motion.planner=fast", "parameter planner must be one of roadmap, rrt, got 'fast'"),
+    ("motion.planner=fast", "parameter planner expects one of roadmap, rrt, got 'fast'"),
     ("motion.contact_coarse=0", "parameter contact_coarse expects a value from 1 to 100 (factor), got 0"),
     ("arms", "--set expects step.param=value"),
 ])

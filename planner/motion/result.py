@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planner.core.bounds import bounded
+from planner.core.bounds import bounded, described
 from planner.core.results import array
 from planner.motion.phase import Phase
 
@@ -17,7 +17,8 @@ PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "cont
 
 @dataclass(frozen=True)
 class MotionParams:
-    planner: str = "roadmap"  # 'roadmap' (Super Graph, lazy revalidation, RRT reconnection) or 'rrt' (RRTConnect alone: the baseline)
+    planner: str = described("roadmap", "roadmap: Super Graph, lazy revalidation, RRT reconnection; rrt: RRTConnect alone (baseline)",
+                             PLANNERS)
     pregrasp_distance: float = bounded(0.06, 0.0, 0.5, "m")  # a hand backs off this far along its approach direction before it approaches
     # the object is lifted off and set down by this much (or twice), vertically where that is free
     lift: float = bounded(0.06, 0.001, 0.5, "m")
