@@ -70,7 +70,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     print(f"{'step':<16}{'seconds':>9}  key figures")
     for record in session.records:
         figures = ", ".join(f"{k}={v}" for k, v in record["stats"].items() if k != "failure")
-        mark = "" if record["name"] in ran else "  (earlier run)"
+        mark = ("  (from the cache)" if record.get("cached") else "") + ("" if record["name"] in ran else "  (earlier run)")
         print(f"{record['name']:<16}{record['seconds']:>9.2f}  {figures}{mark}")
     staged = [(r["name"], session.result(r["name"]).stages, r.get("stage_seconds", [])) for r in session.records
               if "stages" in {f.name for f in dataclasses.fields(step_named(r["name"]).result)}]

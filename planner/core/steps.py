@@ -51,10 +51,12 @@ class StepContext:
 
 @dataclass(frozen=True)
 class StepOutput:
-    """What a step returns: its result, and apart from it the seconds of its stages (for its session record only)."""
+    """What a step returns: its result, and apart from it what the run measured (for its session record only): the
+    seconds of its stages, and whether the result was loaded from the user cache (its seconds are then not its cost)."""
 
     result: Any
     stage_seconds: tuple[float, ...] = ()
+    cached: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "result", read_only(self.result))  # while it is built: the result as it will be shared

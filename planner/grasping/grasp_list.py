@@ -286,15 +286,16 @@ def _step_run(role: str) -> Any:
     def run(ctx: StepContext) -> StepOutput:
         scene, p, seed = ctx.scene, ctx.params, seed_of(ctx.rng)
         arm = getattr(ctx.inputs["arms"], f"{role}_arm")
-        grasps = grasp_list(scene.robot.spec, arm, scene.object_mesh, p, seed, ctx.progress)[0]
+        grasps, cached = grasp_list(scene.robot.spec, arm, scene.object_mesh, p, seed, ctx.progress)
         pose = scene.object_initial if role == "picking" else scene.object_final
         clear = clear_count(scene.robot, grasps, pose, scene.environment)
         if clear < p.min_clear and p.densify > 1:
             ctx.progress(0.0, f"{clear} of {len(grasps)} grasps clear the obstacles at the placement (fewer than {p.min_clear}): "
                               f"searching {p.densify} times the orientations")
-            grasps = grasp_list(scene.robot.spec, arm, scene.object_mesh, dataclasses.replace(p, orientations=p.orientations * p.densify),
-                                seed, ctx.progress)[0]
-        return StepOutput(grasps)
+            grasps, denser_cached = grasp_list(scene.robot.spec, arm, scene.object_mesh,
+                                               dataclasses.replace(p, orientations=p.orientations * p.densify), seed, ctx.progress)
+            cached = cached and denser_cached
+        return StepOutput(grasps, cached=cached)
 
     run.__doc__ = f"The {role} hand's grasp list (paper IV-A)."
     return run

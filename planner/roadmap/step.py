@@ -56,7 +56,7 @@ def session_roadmap_seed(session_seed: int) -> int:
 
 def run(ctx: StepContext) -> StepOutput:
     roadmap, seconds = roadmap_for(ctx.scene, ctx.params, seed_of(ctx.rng), progress=ctx.progress)
-    return StepOutput(roadmap, tuple(seconds.values()))
+    return StepOutput(roadmap, tuple(seconds.values()), cached=not seconds)
 
 
 NAME = "roadmap"
