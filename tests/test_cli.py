@@ -186,8 +186,21 @@ def test_a_port_in_use_is_an_error_naming_it(capsys):
         taken.listen()
         port = taken.getsockname()[1]
         assert main(["workbench", "--port", str(port)]) == 2
-    err = capsys.readouterr().err
+    out, err = capsys.readouterr()
     assert f"port {port} on 127.0.0.1 is in use" in err and "--port" in err
+    assert err.count("\n") == 1 and out == "", (out, err)  # the error alone: no banner of a server on another port
+
+
+def test_a_port_in_use_prints_only_the_error_line(tmp_path):
+    """As a user runs it: one line on stderr, nothing on stdout (viser's banner for the next free port never shows)."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        run = regrasp("workbench", "--port", str(port))
+    assert run.returncode == 2 and run.stdout == "", run.stdout
+    assert run.stderr.splitlines() == [f"error: port {port} on 127.0.0.1 is in use (another workbench?): stop it, or choose another "
+                                       "with --port"], run.stderr
 
 
 class _Terminal(io.StringIO):

@@ -6,6 +6,8 @@ concern (the session's steps through `session_layers`; the Session panel runs st
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import sys
 import threading
 from pathlib import Path
@@ -27,6 +29,7 @@ from .layer_toggles import LayerToggles
 from .notify import error_text
 from .robot_layer import RobotLayer
 from .scene_layer import SceneLayer
+from .serving_port import check_port, port_in_use
 from .session_layers import SessionLayers
 from .session_panel import INITIAL, MOVED, OTHER, SessionPanel
 from .session_store import SESSIONS_DIR
@@ -55,10 +58,12 @@ class Workbench:
         opened = Session.open(session) if session is not None else None
         scene = opened.scene if opened is not None else load_task(task or DEFAULT_TASK)
         self.host = host
+        check_port(host, port)  # before viser prints its banner for a server that would not be the one asked for
         self.server = viser.ViserServer(host, port, label="regrasp", verbose=False)
-        if port and self.server.get_port() != port:  # viser moves on to the next free port; a person asked for this one
-            self.server.stop()
-            raise RegraspError(f"port {port} on {host} is in use (another workbench?): stop it, or choose another with --port")
+        if port and self.server.get_port() != port:  # taken since the check: viser moved on to the next free port
+            with contextlib.redirect_stdout(io.StringIO()):
+                self.server.stop()
+            raise RegraspError(port_in_use(host, port))
         self.guard = ClientGuard(self.server, host)
         self.task_roots = (PROJECT_ROOT, scene.source.resolve().parent)  # where "Load file" may read task files
         self._lock = threading.RLock()
