@@ -4,11 +4,10 @@ from __future__ import annotations
 import copy
 import re
 import shutil
-import tempfile
 from pathlib import Path
 
 from planner.core.errors import RegraspError
-from planner.core.paths import PROJECT_ROOT, plain_name
+from planner.core.paths import PROJECT_ROOT, plain_name, temporary_folder
 from planner.core.results import writing
 from planner.core.session import Session
 
@@ -24,8 +23,9 @@ SCRATCH_PREFIX = "regrasp-session-"
 
 
 def scratch_folder() -> Path:
-    """A fresh temporary folder for a session run from the GUI before it is saved (`remove_scratch` deletes it)."""
-    return Path(tempfile.mkdtemp(prefix=SCRATCH_PREFIX)) / "session"
+    """A fresh temporary folder for a session run from the GUI before it is saved (`remove_scratch` deletes it, and
+    the process's exit deletes it if still there: a workbench never closed leaves none behind)."""
+    return temporary_folder(SCRATCH_PREFIX) / "session"
 
 
 def remove_scratch(folder: Path) -> None:
