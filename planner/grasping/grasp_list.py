@@ -26,7 +26,7 @@ from planner.core.errors import RegraspError
 from planner.core.forked import available_cpus, forked_map
 from planner.core.results import array, load_result, read_only, save_result, writing
 from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
-from planner.core.user_cache import cache_key, cache_path, computing, read_cached
+from planner.core.user_cache import building, cache_key, cache_path, computing, read_cached
 from planner.grasping.finger_workspace import FingerWorkspace, WorkspaceParams, hand_workspaces
 from planner.grasping.frames import box_grid, hopf_rotations
 from planner.grasping.object_model import ObjectModel, mesh_bytes, object_model
@@ -255,10 +255,11 @@ def grasp_list(spec: RobotSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams,
                                  f"grasp list of the {arm} hand")
             if cached is not None:
                 return cached, True
-        result = compute_grasp_list(hand, arm, mesh, p, seed, progress, workers)
-        with writing(folder):
-            folder.mkdir(parents=True, exist_ok=True)
-        save_result(result, folder, "grasps")
+        with building(f"the grasp list of the {arm} hand ({p.positions * p.orientations} frames, entry {key})"):
+            result = compute_grasp_list(hand, arm, mesh, p, seed, progress, workers)
+            with writing(folder):
+                folder.mkdir(parents=True, exist_ok=True)
+            save_result(result, folder, "grasps")
     return read_only(result), False
 
 
