@@ -3,6 +3,7 @@ with the json and csv modules and compared with motion.npz and the robot model a
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import subprocess
 import sys
@@ -13,8 +14,9 @@ import pinocchio as pin
 import pytest
 from sandbox import EXAMPLE, cli_env, copy_example, one_error_line
 
+from planner.core.results import load_result, save_result
 from planner.core.session import Session
-from planner.motion.result import PHASES
+from planner.motion.result import PHASES, Motion
 
 
 def export(cwd: Path, *args: str) -> subprocess.CompletedProcess:
@@ -118,3 +120,14 @@ def test_stored_joint_names_must_be_the_models(tmp_path: Path) -> None:
     run = export(tmp_path, str(session), "--trajectory", "t.json")
     line = one_error_line(run.stderr)
     assert run.returncode == 2 and "motion.json" in line and "joint_names" in line and "49 joint names" in line
+
+
+def test_joint_names_are_saved_with_the_motion_and_absent_from_older_files(tmp_path: Path, model_joints: list[str]) -> None:
+    """A motion with its names saves and loads them; one without (an older session's) saves as it was written: no field."""
+    old = load_result(Motion, EXAMPLE, "motion")
+    assert old.joint_names == ()
+    save_result(old, tmp_path, "old")
+    assert "joint_names" not in json.loads((tmp_path / "old.json").read_text())
+    save_result(dataclasses.replace(old, joint_names=tuple(model_joints)), tmp_path, "new")
+    assert json.loads((tmp_path / "new.json").read_text())["joint_names"] == model_joints
+    assert load_result(Motion, tmp_path, "new").joint_names == tuple(model_joints)

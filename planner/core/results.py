@@ -4,7 +4,8 @@ Fields declared with `array(dtype, shape)` go to the step's `.npz` (shape entrie
 name like "n" shared between fields (the session fixes "nq" to the robot's DoF), or None for any); every other field must be JSON-able
 (numbers, strings, bools, lists, dicts) and goes to the step's `.json`. Loading checks every
 array's dtype and shape and every JSON field's presence, with errors naming the file and field; a JSON field declared
-with a default was added later, and a file written before it may lack it (it loads with the default).
+with a default was added later: it is written only when it differs from its default, and a file without it (written
+before it) loads with the default.
 """
 from __future__ import annotations
 
@@ -124,7 +125,7 @@ def save_result(result: Any, folder: Path, stem: str) -> list[str]:
         value = getattr(result, f.name)
         if _is_array(f):
             arrays[f.name] = np.ascontiguousarray(value, dtype=np.dtype(f.metadata["dtype"]))
-        else:
+        elif f.default is dataclasses.MISSING or value != f.default:  # a field added later, at its default: as older files have it
             rest[f.name] = value
     buf = io.BytesIO()
     np.savez(buf, **arrays)
