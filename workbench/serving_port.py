@@ -2,9 +2,13 @@
 print its banner for it), while a person who asked for a port wants that one or a clear error."""
 from __future__ import annotations
 
+import contextlib
 import errno
+import io
 import os
 import socket
+
+import viser
 
 from planner.core.errors import RegraspError
 
@@ -30,3 +34,15 @@ def check_port(host: str, port: int) -> None:
             if exc.errno == errno.EADDRINUSE:
                 raise RegraspError(port_in_use(host, port)) from exc
             raise RegraspError(f"cannot serve on {host} port {port}: {os.strerror(exc.errno) if exc.errno else exc}") from exc
+
+
+def start_server(host: str, port: int) -> viser.ViserServer:
+    """The workbench's viser server on `host`:`port` (0: any free port); a RegraspError (one line, no banner of viser's)
+    when the port is taken, also when it was taken between the check and the start."""
+    check_port(host, port)
+    server = viser.ViserServer(host, port, label="regrasp", verbose=False)
+    if port and server.get_port() != port:  # viser moved on to the next free port
+        with contextlib.redirect_stdout(io.StringIO()):
+            server.stop()
+        raise RegraspError(port_in_use(host, port))
+    return server
