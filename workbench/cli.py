@@ -33,7 +33,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 def _cmd_export(args: argparse.Namespace) -> int:
     from planner.core.errors import RegraspError
-    from planner.trajectory import FORMATS, output_path, write_trajectory
+    from planner.motion.trajectory_file import FORMATS, output_path, write_trajectory
 
     if not (args.html or args.trajectory):
         raise RegraspError("export: give --html FILE, --trajectory FILE, or both")

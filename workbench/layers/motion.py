@@ -19,7 +19,7 @@ from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.model.task import Scene
 from planner.motion.result import PHASE_SECONDS, PHASES, Motion
-from planner.trajectory import trajectory_of, trajectory_text
+from planner.motion.trajectory_file import trajectory_of, trajectory_text
 
 from ..meshes import matrix_wxyz
 from ..notify import error_text
@@ -34,7 +34,7 @@ PHASE_COLOR_NAMES = ("teal", "violet", "magenta", "grey")
 ROUTE_THICKNESS = 0.004  # m
 FPS = 30.0  # frames a second at most while playing (samples are skipped when the trajectory's rate or the speed is higher)
 SPEEDS = (0.1, 4.0)  # playback speed range (1 = real time)
-TRAJECTORY_FORMATS = ("JSON", "CSV")  # the trajectory downloads (planner/trajectory.py), by the button's label
+TRAJECTORY_FORMATS = ("JSON", "CSV")  # the trajectory downloads (planner/motion/trajectory_file.py), by the button's label
 KEYFRAMES = ("initial", "q_grasp", "q_exch", "q_place", "final")  # `Motion.keyframes` (not "exchange": the Double grasps folder has it)
 
 
