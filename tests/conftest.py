@@ -1,12 +1,15 @@
-"""Shared fixtures: a private cache folder, the default scene and its collision model (built once)."""
+"""Shared fixtures: a private cache folder (deleted when the tests end), the default scene and its collision model
+(built once)."""
 from __future__ import annotations
 
 import os
-import tempfile
 
 import pytest
 
-os.environ.setdefault("REGRASP_CACHE", tempfile.mkdtemp(prefix="regrasp-test-cache-"))
+from planner.core.paths import temporary_folder
+
+if "REGRASP_CACHE" not in os.environ:  # a cache given in the environment is the user's, and stays
+    os.environ["REGRASP_CACHE"] = str(temporary_folder("regrasp-test-cache-"))
 
 
 @pytest.fixture(scope="session")

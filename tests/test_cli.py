@@ -169,7 +169,7 @@ def test_params_lists_every_parameter_with_type_and_default():
     ("motion.rrt_motions=fast", "parameter rrt_motions expects int, got 'fast'"),
     ("exchange.keep=2.5", "parameter keep expects int"),
     ("roadmap.radius=NaN", "parameter radius expects a finite number"),
-    ("motion.planner=fast", "parameter planner must be one of roadmap, rrt, got 'fast'"),
+    ("motion.planner=fast", "parameter planner expects one of roadmap, rrt, got 'fast'"),
     ("motion.contact_coarse=0", "parameter contact_coarse expects a value from 1 to 100 (factor), got 0"),
     ("arms", "--set expects step.param=value"),
 ])
@@ -186,8 +186,21 @@ def test_a_port_in_use_is_an_error_naming_it(capsys):
         taken.listen()
         port = taken.getsockname()[1]
         assert main(["workbench", "--port", str(port)]) == 2
-    err = capsys.readouterr().err
+    out, err = capsys.readouterr()
     assert f"port {port} on 127.0.0.1 is in use" in err and "--port" in err
+    assert err.count("\n") == 1 and out == "", (out, err)  # the error alone: no banner of a server on another port
+
+
+def test_a_port_in_use_prints_only_the_error_line(tmp_path):
+    """As a user runs it: one line on stderr, nothing on stdout (viser's banner for the next free port never shows)."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        run = regrasp("workbench", "--port", str(port))
+    assert run.returncode == 2 and run.stdout == "", run.stdout
+    assert run.stderr.splitlines() == [f"error: port {port} on 127.0.0.1 is in use (another workbench?): stop it, or choose another "
+                                       "with --port"], run.stderr
 
 
 class _Terminal(io.StringIO):

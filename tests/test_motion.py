@@ -91,6 +91,8 @@ def test_trajectory_passes_the_task_configurations(either):
     assert not m.failure and m.double_grasp >= 0
     k = m.double_grasp
     assert np.array_equal(m.q[0], scene.q_initial) and np.array_equal(m.q[-1], scene.q_final)
+    model = scene.robot.model
+    assert list(m.joint_names) == [model.names[j] for j in range(1, model.njoints)]  # q's columns, named as the model has them
     for key, q in zip(m.keyframes[1:4], (dg.q_grasp[k], dg.q_exch[k], dg.q_place[k])):
         arms = np.concatenate([scene.robot.torso_idx] + [scene.robot.arm_idx[a] for a in m.arms])
         assert np.abs(m.q[key][arms] - q[arms]).max() < 0.05  # within the IK refinement that makes hand-overs exact

@@ -15,6 +15,8 @@ import pytest
 from sandbox import cli_env
 from test_workbench_browser import _free_port, _wait_for
 
+from planner.core.session import Session
+
 pytestmark = pytest.mark.slow  # each test starts and signals whole planner processes
 
 WORKERS_START_WITHIN = 900.0  # s: a cold cache builds the pair set, the finger workspaces and the object model first
@@ -24,6 +26,7 @@ WORKBENCH_RUN = """
 import faulthandler
 import signal
 import sys
+from pathlib import Path
 from workbench import app
 
 faulthandler.register(signal.SIGUSR1, all_threads=True)  # where every thread is, should it not stop (see _stopped)
@@ -31,7 +34,7 @@ faulthandler.register(signal.SIGUSR1, all_threads=True)  # where every thread is
 
 class Running(app.Workbench):
     def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
+        super().__init__(*args, sessions_dir=Path(sys.argv[2]), **kwargs)  # where a stopped run's steps are kept
         self.session_panel.run_until("pick_grasps")
 
 
@@ -96,13 +99,13 @@ def _plan(out: Path) -> list[str]:
     return [sys.executable, "-m", "workbench.cli", "plan", "default", "--out", str(out)]
 
 
-def _workbench() -> list[str]:
-    return [sys.executable, "-c", WORKBENCH_RUN, str(_free_port())]
+def _workbench(sessions: Path) -> list[str]:
+    return [sys.executable, "-c", WORKBENCH_RUN, str(_free_port()), str(sessions)]
 
 
 @pytest.mark.parametrize("command", ["plan", "workbench"])
 def test_sigkill_leaves_no_worker(started, tmp_path: Path, command: str) -> None:
-    proc, workers = started(_plan(tmp_path / "s") if command == "plan" else _workbench())
+    proc, workers = started(_plan(tmp_path / "s") if command == "plan" else _workbench(tmp_path / "sessions"))
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert _wait_for(lambda: not any(_running(w) for w in workers), WORKERS_GONE_WITHIN), \
@@ -134,13 +137,15 @@ def _stopped(proc: subprocess.Popen, timeout: float) -> int:
         pytest.fail(f"the workbench did not stop within {timeout:.0f} s; its threads:\n{stderr}")
 
 
-def test_sigterm_of_the_workbench_stops_a_running_steps_workers(started) -> None:
-    proc, workers = started(_workbench())
+def test_sigterm_of_the_workbench_stops_a_running_steps_workers(started, tmp_path: Path) -> None:
+    proc, workers = started(_workbench(tmp_path / "sessions"))
     proc.send_signal(signal.SIGTERM)
     assert _stopped(proc, 120) == 0
     stderr = proc.stderr.read() if proc.stderr else ""
     assert "Traceback" not in stderr, stderr
     assert not any(_running(w) for w in workers)
+    kept = tmp_path / "sessions" / "default-unsaved-1"  # the step the stopped run had finished (arms), kept
+    assert [p.name for p in (tmp_path / "sessions").iterdir()] == [kept.name] and Session.open(kept).finished() == ["arms"]
 
 
 def test_worker_pool_kills_its_workers_when_the_caller_raises() -> None:

@@ -12,11 +12,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+import viser
 from sandbox import EXAMPLE, one_error_line
 from test_workbench_browser import _free_port
 
 from planner.cli.plan import params_text
-from planner.core.bounds import SEED
+from planner.core.bounds import SEED, field_hint
 from planner.core.errors import InputError, RegraspError
 from planner.core.paths import DEFAULT_TASK
 from planner.core.session import MANIFEST, Session
@@ -152,6 +153,33 @@ def test_a_grid_too_fine_for_the_box_is_refused_before_it_is_made() -> None:
     assert len(grid_nodes(lower, upper, fits)) <= MAX_GRID_NODES
 
 
+HINTLESS = {"motion"}  # MotionParams still explains its numbers in comments (to move into `bounded` once its timing work lands)
+
+
+def test_every_parameter_declares_a_one_line_hint() -> None:
+    for step in PIPELINE:
+        for f in dataclasses.fields(step.params):
+            hint = field_hint(f)
+            if step.name in HINTLESS and f.name != "planner":
+                continue
+            assert hint.strip() and "\n" not in hint and len(hint) <= 120, f"{step.name}.{f.name}: {hint!r}"
+
+
+def test_a_name_with_choices_is_checked_against_them() -> None:
+    motion = next(s for s in PIPELINE if s.name == "motion")
+    assert motion.make_params({"planner": "rrt"}).planner == "rrt"
+    with pytest.raises(RegraspError, match="parameter planner expects one of roadmap, rrt, got 'RRT'"):
+        motion.make_params({"planner": "RRT"})
+
+
+def test_params_lists_each_hint_below_its_parameter() -> None:
+    lines = params_text().splitlines()
+    at = next(i for i, li in enumerate(lines) if li.split()[:1] == ["exchange.reach_fraction"])
+    assert lines[at + 1].strip() == "a node is reachable within this fraction of each arm's reach"
+    planner = next(li for li in lines if li.split()[:1] == ["motion.planner"])
+    assert planner.endswith("one of roadmap, rrt"), planner
+
+
 def test_params_lists_each_range_and_unit() -> None:
     lines = params_text().splitlines()
     assert any(li.split()[:1] == ["exchange.step"] and "default 0.05 " in li and li.endswith("from 0.01 to 0.5 m") for li in lines), lines
@@ -172,10 +200,19 @@ def test_workbench_inputs_take_their_limits_and_hints_from_the_declaration(workb
     panel.rerun_step.value = "exchange"
     assert panel._params is not None
     step = panel._params.handles["step"]
-    assert (step.min, step.max) == (0.01, 0.5) and step.hint == "from 0.01 to 0.5 m; default 0.05", (step.min, step.max, step.hint)
+    assert (step.min, step.max) == (0.01, 0.5), (step.min, step.max)
+    assert step.hint == "spacing of the exchange grid; from 0.01 to 0.5 m; default 0.05", step.hint
     panel.rerun_step.value = "motion"
     rate = panel._params.handles["rate"]
-    assert (rate.min, rate.max) == (1.0, 1000.0) and rate.hint.startswith("from 1 to 1000 Hz")
+    assert (rate.min, rate.max) == (1.0, 1000.0) and "from 1 to 1000 Hz" in rate.hint
+    planner = panel._params.handles["planner"]
+    assert isinstance(planner, viser.GuiDropdownHandle) and tuple(planner.options) == ("roadmap", "rrt"), planner
+    assert planner.value == "roadmap" and planner.hint.startswith("roadmap: Super Graph")
+    planner.value = "rrt"
+    assert panel._params.values()["planner"] == "rrt"
+    panel.rerun_step.value = "roadmap"
+    tree = panel._params.handles["tree"]
+    assert isinstance(tree, viser.GuiCheckboxHandle) and tree.hint.startswith("the tree variant")
 
 
 def test_workbench_refuses_an_out_of_range_value_before_a_rerun_folder(workbench: Workbench) -> None:

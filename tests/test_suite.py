@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -258,3 +259,20 @@ def test_the_report_opens_in_chromium_and_shows_its_plots(local_run, suite_file,
                 assert page.locator("#success-rate").inner_text() == "100.0%"  # the totals are the data's, as given
     finally:
         page.close()
+
+
+def test_a_cold_suite_in_a_log_says_each_task_and_each_cache_entry_it_builds(tmp_path):
+    """Its stderr a file, with an empty cache: a line per cache entry as it is built and when it is stored, and one per
+    finished task (a cold run used to say nothing between "generating" and the end)."""
+    path = tmp_path / "one.toml"
+    path.write_text(SUITE.replace("tasks = 4", "tasks = 1") + "\n[params.pick_grasps]\npositions = 20\norientations = 20\ndensify = 1\n")
+    run = regrasp("suite", str(path), "--out", str(tmp_path / "out"), "--workers", "1", "--until", "pick_grasps",
+                  env={"REGRASP_CACHE": str(tmp_path / "cache")})
+    assert run.returncode == 0, run.stderr
+    lines = run.stderr.splitlines()
+    built = [li for li in lines if li.startswith("cache: built ")]
+    assert any(li.startswith("cache: built the grasp list of the right hand (400 frames") for li in built), run.stderr
+    assert any(li.startswith("cache: built the object model") for li in built), run.stderr
+    assert all(re.search(r" in \d+\.\d s$", li) for li in built), built
+    assert len([li for li in lines if li.startswith("cache: building ")]) == len(built)
+    assert any(li.startswith("[1/1] 0001-statuette: ok (") for li in lines), run.stderr

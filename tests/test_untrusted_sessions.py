@@ -178,6 +178,7 @@ MANIFEST_CASES = {
     "param of the wrong type": (_set("steps", 0, "params", "seeds", value="many"), "steps[0].params", "expects int"),
     "param NaN": (_set("steps", 0, "params", "tolerance", value=math.nan), "steps[0].params.tolerance", "finite"),
     "stage seconds negative": (_set("steps", 3, "stage_seconds", 0, value=-2.0), "steps[3].stage_seconds[0]", ">= 0"),
+    "cached not a flag": (_set("steps", 6, "cached", value="yes"), "steps[6].cached", "expected true or false"),
     "versions not strings": (_set("versions", "numpy", value=2), "versions.numpy", "expected a version string"),
     "steps not a list": (_set("steps", value={"arms": {}}), "steps", "expected a list"),
     "task not an object": (_set("task", value="default.toml"), "task", "expected the task as a JSON object"),

@@ -127,8 +127,9 @@ def _wait_for(condition: Callable[[], bool], timeout: float = 10.0) -> bool:
 
 
 @pytest.fixture(scope="module")
-def workbench() -> Iterator[Workbench]:
-    wb = Workbench(DEFAULT_TASK, "127.0.0.1", _free_port())
+def workbench(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Workbench]:
+    """On the default task; the steps it runs are kept at close in a sessions folder of its own, never the project's."""
+    wb = Workbench(DEFAULT_TASK, "127.0.0.1", _free_port(), sessions_dir=tmp_path_factory.mktemp("sessions"))
     yield wb
     wb.close()
 

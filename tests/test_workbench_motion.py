@@ -3,8 +3,10 @@ trajectory; the object's pixels follow the holding hand from a Carry sample to a
 (the joint sliders stay); the exported HTML page animates offline."""
 from __future__ import annotations
 
+import csv
 import dataclasses
 import html
+import json
 import shutil
 import subprocess
 import sys
@@ -214,6 +216,23 @@ def test_exported_html_animates(page: Page, layer: MotionLayer, browser: Browser
             assert _wait_for(lambda shot=shot: _changed(_scene(exported), shot) > CHANGED, 20), "the exported page does not animate"
     finally:
         exported.close()
+
+
+@pytest.mark.parametrize("label", ["JSON", "CSV"])
+def test_trajectory_downloads_hold_the_saved_samples(page: Page, layer: MotionLayer, tmp_path: Path, label: str) -> None:
+    """The Trajectory buttons download the motion: the JSON's positions, the CSV's position columns are motion.npz's q."""
+    with page.expect_download(timeout=60_000) as download:
+        page.get_by_role("button", name=label, exact=True).click()
+    out = tmp_path / download.value.suggested_filename
+    download.value.save_as(out)
+    assert out.suffix == f".{label.lower()}"
+    if label == "JSON":
+        q = [p["positions"] for p in json.loads(out.read_text())["points"]]
+    else:
+        header, *rows = list(csv.reader(out.open()))
+        columns = [i for i, name in enumerate(header) if name.startswith("position:")]
+        q = [[float(r[i]) for i in columns] for r in rows]
+    assert np.array_equal(np.array(q), layer.result.q)
 
 
 def test_playback_stops_when_the_layer_is_removed(workbench: Workbench, layer: MotionLayer) -> None:

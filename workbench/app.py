@@ -27,6 +27,7 @@ from .layer_toggles import LayerToggles
 from .notify import error_text
 from .robot_layer import RobotLayer
 from .scene_layer import SceneLayer
+from .serving_port import start_server
 from .session_layers import SessionLayers
 from .session_panel import INITIAL, MOVED, OTHER, SessionPanel
 from .session_store import SESSIONS_DIR
@@ -55,10 +56,7 @@ class Workbench:
         opened = Session.open(session) if session is not None else None
         scene = opened.scene if opened is not None else load_task(task or DEFAULT_TASK)
         self.host = host
-        self.server = viser.ViserServer(host, port, label="regrasp", verbose=False)
-        if port and self.server.get_port() != port:  # viser moves on to the next free port; a person asked for this one
-            self.server.stop()
-            raise RegraspError(f"port {port} on {host} is in use (another workbench?): stop it, or choose another with --port")
+        self.server = start_server(host, port)
         self.guard = ClientGuard(self.server, host)
         self.task_roots = (PROJECT_ROOT, scene.source.resolve().parent)  # where "Load file" may read task files
         self._lock = threading.RLock()
@@ -159,6 +157,7 @@ class Workbench:
             self._refuse_task("Could not load the task", error_text(exc), client)
             return
         self._show(scene)
+        self.session_panel.scratch = None  # the last task's unsaved steps kept (and said) now, not at the next run
 
     def _refuse_task(self, title: str, message: str, client: viser.ClientHandle | None) -> None:
         """Say under the task (and to the asking tab) why the task shown stays."""

@@ -32,10 +32,21 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from .export import export_html
+    from planner.core.errors import RegraspError
+    from planner.motion.trajectory_file import FORMATS, output_path, write_trajectory
 
-    export_html(Path(args.session), Path(args.html))
-    print(f"wrote {args.html}")
+    if not (args.html or args.trajectory):
+        raise RegraspError("export: give --html FILE, --trajectory FILE, or both")
+    html = args.html and output_path(Path(args.html), "--html", (".html", ".htm"), args.force)
+    trajectory = args.trajectory and output_path(Path(args.trajectory), "--trajectory", FORMATS, args.force)
+    if trajectory:
+        points = write_trajectory(Path(args.session), trajectory)
+        print(f"wrote {trajectory} ({points} points)")
+    if html:
+        from .export import export_html
+
+        export_html(Path(args.session), html)
+        print(f"wrote {html}")
     return 0
 
 
@@ -60,9 +71,13 @@ def add_workbench_commands(line: CommandLine) -> None:
     r = line.command("replay", "open the workbench on a saved session (nothing is recomputed)", _cmd_replay)
     r.add("session", metavar="SESSION", help="session folder")
     _add_server(r)
-    e = line.command("export", "export a saved session as one self-contained HTML file", _cmd_export)
+    e = line.command("export", "export a saved session as one self-contained HTML file, or its motion as a trajectory file",
+                     _cmd_export)
     e.add("session", metavar="SESSION", help="session folder")
-    e.add("--html", required=True, metavar="FILE", help="HTML file to write")
+    e.add("--html", metavar="FILE", help="HTML file to write (.html)")
+    e.add("--trajectory", metavar="FILE", help="trajectory file to write: .json (a ROS JointTrajectory and more) or .csv "
+                                                "(docs/sessions.md)")
+    e.add("--force", action="store_true", help="replace files that exist")
     s = line.command("screenshot", "picture the workbench replaying a session (the README's image), with headless chromium",
                      _cmd_screenshot)
     s.add("session", nargs="?", default=str(EXAMPLE_SESSION), metavar="SESSION", help="session folder")

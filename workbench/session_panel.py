@@ -32,9 +32,9 @@ from .param_inputs import ParamInputs, recorded_params, whole
 from .session_layers import SessionLayers
 from .session_store import (
     check_name,
+    discard_scratch,
     free_name,
     list_sessions,
-    remove_scratch,
     save_copy,
     scratch_copy,
     scratch_folder,
@@ -61,6 +61,7 @@ class SessionPanel:
         self.job: threading.Thread | None = None
         self._starting = threading.Lock()  # makes "is a run going? then start one" one step
         self._scratch: Path | None = None  # the session folder the GUI created; the only one runs write into
+        self._saved_records: list | None = None  # the scratch session's step records when it was last saved
         self._poses: dict[str, Pose] = {}
         self._syncing_robot_at = False  # True while `showing` rewrites "Robot at": its callback must not pose the robot
         self._params: ParamInputs | None = None
@@ -106,7 +107,8 @@ class SessionPanel:
     # -- what is shown ---------------------------------------------------------------------------
 
     def shown(self, session: Session | None, layers: SessionLayers | None) -> None:
-        """Refresh the panel for the session the workbench now draws (None: just a task)."""
+        """Refresh the panel for the session the workbench now draws (None: just a task); an earlier message goes."""
+        self.message.visible = False
         self.table.content = step_table(session)
         finished = session.finished() if session is not None else []
         drawn = [name for name in finished if layers is not None and name in layers.layers]
@@ -200,6 +202,8 @@ class SessionPanel:
         if self.wb.session is None:
             raise RegraspError("nothing to save: run a step or load a session first")
         saved = save_copy(self.wb.session, self.sessions_dir / check_name(name), overwrite)
+        if self.wb.session.folder == self._scratch:
+            self._saved_records = self.wb.session.records
         self.saved.options = self._saved_options()
         self.saved.value = saved.folder.name
         return saved
@@ -312,6 +316,7 @@ class SessionPanel:
         else:
             new = scratch_copy(session)
         self.scratch = new.folder
+        self._saved_records = session.records if session is not None else None  # a copy's steps are saved where they came from
         return new
 
     @property
@@ -321,10 +326,13 @@ class SessionPanel:
 
     @scratch.setter
     def scratch(self, folder: Path | None) -> None:
-        """Replace the scratch session; the one replaced is deleted (nothing shows it any more: it was saved, if at all, as
-        a copy)."""
+        """Replace the scratch session; the one replaced is deleted once its unsaved steps are kept (`discard_scratch`)."""
         if self._scratch is not None and self._scratch != folder:
-            remove_scratch(self._scratch)
+            said = discard_scratch(self._scratch, self.sessions_dir, self._saved_records)
+            if said is not None:
+                self._say(*said)
+                self.saved.options = self._saved_options()
+            self._saved_records = None
         self._scratch = folder
 
     def close(self) -> None:

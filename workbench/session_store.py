@@ -1,16 +1,18 @@
-"""The saved sessions folder: listing it, saving a session into it (never overwriting unasked), free names."""
+"""The saved sessions folder: listing it, saving a session into it (never overwriting unasked), free names; scratch
+sessions (runs from the GUI before they are saved), whose unsaved steps are kept there before they are deleted."""
 from __future__ import annotations
 
 import copy
 import re
 import shutil
-import tempfile
 from pathlib import Path
 
 from planner.core.errors import RegraspError
-from planner.core.paths import PROJECT_ROOT, plain_name
+from planner.core.paths import PROJECT_ROOT, plain_name, temporary_folder
 from planner.core.results import writing
 from planner.core.session import Session
+
+from .notify import error_text
 
 SESSIONS_DIR = PROJECT_ROOT / "sessions"
 
@@ -24,8 +26,9 @@ SCRATCH_PREFIX = "regrasp-session-"
 
 
 def scratch_folder() -> Path:
-    """A fresh temporary folder for a session run from the GUI before it is saved (`remove_scratch` deletes it)."""
-    return Path(tempfile.mkdtemp(prefix=SCRATCH_PREFIX)) / "session"
+    """A fresh temporary folder for a session run from the GUI before it is saved (`remove_scratch` deletes it, and
+    the process's exit deletes it if still there: a workbench never closed leaves none behind)."""
+    return temporary_folder(SCRATCH_PREFIX) / "session"
 
 
 def remove_scratch(folder: Path) -> None:
@@ -41,15 +44,40 @@ def scratch_copy(session: Session) -> Session:
     return Session(folder, copy.deepcopy(session.manifest), session.scene)
 
 
-def free_name(folder: Path, base: str) -> str:
-    """`<base>-rerun-N` with the smallest N not taken in `folder`."""
+def free_name(folder: Path, base: str, kind: str = "rerun") -> str:
+    """`<base>-<kind>-N` with the smallest N not taken in `folder`."""
     n = 1
-    while (folder / f"{base}-rerun-{n}").exists():
+    while (folder / f"{base}-{kind}-{n}").exists():
         n += 1
-    return f"{base}-rerun-{n}"
+    return f"{base}-{kind}-{n}"
 
 
-MAX_SESSION_NAME = 100  # characters; leaves room for `-rerun-N` and the staging folder's `.<name>.saving`
+def keep_unsaved(folder: Path, sessions_dir: Path, saved: list | None) -> Path | None:
+    """Copy a scratch session about to be deleted into `sessions_dir/<task>-unsaved-N` (listed with the saved sessions)
+    when it has finished steps not saved as they are (`saved`: its step records when it was last saved); the copy's
+    folder, or None when there was nothing to keep."""
+    session = Session.open(folder)
+    if not session.records or session.records == saved:
+        return None
+    try:
+        base = check_name(session.scene.name)
+    except RegraspError:  # a task name that is no folder name
+        base = "untitled"
+    return save_copy(session, sessions_dir / free_name(sessions_dir, base, "unsaved")).folder
+
+
+def discard_scratch(folder: Path, sessions_dir: Path, saved: list | None) -> tuple[str, str, bool] | None:
+    """Delete a scratch session once `keep_unsaved` kept what it must; what to say (title, text, whether an error), if
+    anything. A copy that fails leaves the folder until the process ends."""
+    try:
+        kept = keep_unsaved(folder, sessions_dir, saved)
+    except Exception as exc:  # e.g. a read-only sessions folder: said, never raised into the GUI's callback
+        return "Unsaved work not kept", f"{error_text(exc)}; it is in {folder} until the workbench stops", True
+    remove_scratch(folder)
+    return ("Unsaved work kept", f"the steps run here are in {kept}: Load it from Saved", False) if kept else None
+
+
+MAX_SESSION_NAME = 100  # characters; leaves room for `-rerun-N` (`-unsaved-N`) and the staging folder's `.<name>.saving`
 _SESSION_NAME = re.compile(r"(?!-)[\w-]+")  # letters, digits, - and _; not starting with -
 
 

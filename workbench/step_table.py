@@ -12,6 +12,7 @@ from .layers import LAYERS
 
 MAX_FIGURES = 3  # per row when a step names no key figures: the panel is narrow; the details view shows them all
 MAX_TEXT = 16  # characters of a text figure in the table
+CACHED = "(cached)"  # after the seconds of a step whose result came from the user cache: they are not what it costs
 KEY_FIGURES = {  # the figures a person looks at first, per step (the rest: in the step's details)
     "arms": ("picking_arm", "placing_arm"),
     "pick_grasps": ("kept", "best_quality"),
@@ -40,7 +41,8 @@ def key_figures(name: str, stats: dict[str, Any]) -> list[tuple[str, Any]]:
 
 
 def step_table(session: Session | None) -> str:
-    """One row per pipeline step: done (drawn, or listed when no layer draws it), failed or pending, seconds, key figures."""
+    """One row per pipeline step: done (drawn, or listed when no layer draws it), failed or pending, seconds (marked
+    when the result came from the user cache), key figures."""
     records = {r["name"]: r for r in session.records} if session is not None else {}
     rows = ["| step | status | s | key figures |", "| --- | --- | ---: | --- |"]
     for step in PIPELINE:
@@ -50,7 +52,8 @@ def step_table(session: Session | None) -> str:
             continue
         status = "failed" if record["stats"].get("failure") else "done" if step.name in LAYERS else "done (not drawn)"
         figures = ", ".join(f"{plain(k)}={_figure(v)}" for k, v in key_figures(step.name, record["stats"]))
-        rows.append(f"| {step.name} | {status} | {record['seconds']:.1f} | {figures} |")
+        seconds = f"{record['seconds']:.1f}" + (f" {CACHED}" if record.get("cached") else "")
+        rows.append(f"| {step.name} | {status} | {seconds} | {figures} |")
     return "\n".join(rows)
 
 
@@ -58,7 +61,8 @@ def step_details(session: Session, name: str) -> str:
     """Everything the session records of one finished step: seconds, seed, every figure and parameter."""
     record = session.record_of(name)
     step = next(s for s in PIPELINE if s.name == name)
-    lines = [f"**{name}** — {step.summary}", "", f"{record['seconds']:.2f} s, seed {plain(record['seed'])}", "",
+    cached = f" {CACHED}: loaded from the user cache, not computed" if record.get("cached") else ""
+    lines = [f"**{name}** — {step.summary}", "", f"{record['seconds']:.2f} s{cached}, seed {plain(record['seed'])}", "",
              "| figure | value |", "| --- | --- |"]
     lines += [f"| {plain(k)} | {_figure(json.dumps(v) if isinstance(v, (dict, list)) else v, None)} |" for k, v in record["stats"].items()]
     if record.get("stage_seconds"):

@@ -70,7 +70,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     print(f"{'step':<16}{'seconds':>9}  key figures")
     for record in session.records:
         figures = ", ".join(f"{k}={v}" for k, v in record["stats"].items() if k != "failure")
-        mark = "" if record["name"] in ran else "  (earlier run)"
+        mark = ("  (from the cache)" if record.get("cached") else "") + ("" if record["name"] in ran else "  (earlier run)")
         print(f"{record['name']:<16}{record['seconds']:>9.2f}  {figures}{mark}")
     staged = [(r["name"], session.result(r["name"]).stages, r.get("stage_seconds", [])) for r in session.records
               if "stages" in {f.name for f in dataclasses.fields(step_named(r["name"]).result)}]
@@ -85,7 +85,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
 
 def params_text() -> str:
-    """Every pipeline step's parameters with their types, defaults, ranges and units, as `regrasp params` prints them."""
+    """Every pipeline step's parameters with their types, defaults, ranges and units (or choices), each with its one-line
+    hint below it, as `regrasp params` prints them."""
+    from planner.core.bounds import field_choices, field_hint
     from planner.core.steps import param_bounds
     from planner.pipeline import PIPELINE
 
@@ -94,8 +96,11 @@ def params_text() -> str:
         defaults, bounds = step.params(), param_bounds(step.params)
         lines.append(f"{step.name}: {step.summary}")
         for f in dataclasses.fields(step.params):
-            default, bound = f"default {getattr(defaults, f.name)!r}", bounds.get(f.name)
-            lines.append(f"  {step.name}.{f.name:<22} {f.type:<6} {default:<16} {bound.describe() if bound else ''}".rstrip())
+            default, bound, choices = f"default {getattr(defaults, f.name)!r}", bounds.get(f.name), field_choices(f)
+            allowed = bound.describe() if bound else f"one of {', '.join(choices)}" if choices else ""
+            lines.append(f"  {step.name}.{f.name:<22} {f.type:<6} {default:<16} {allowed}".rstrip())
+            if field_hint(f):
+                lines.append(f"      {field_hint(f)}")
         lines.append("")
     lines.append("Set one with `regrasp plan TASK --out DIR --set STEP.PARAM=VALUE` (the value is read as JSON, else as a string).")
     return "\n".join(lines)
@@ -135,4 +140,4 @@ def add_plan(line: CommandLine) -> None:
 
 def add_params(line: CommandLine) -> None:
     """`regrasp params`."""
-    line.command("params", "list every step's parameters with their types, defaults, ranges and units", _cmd_params)
+    line.command("params", "list every step's parameters with their types, defaults, ranges, units and what they do", _cmd_params)

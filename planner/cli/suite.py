@@ -9,6 +9,7 @@ from planner.cli.arguments import CommandLine, positive_int, suite_argument
 
 
 def _cmd_suite(args: argparse.Namespace) -> int:
+    import logging
     import os
 
     from planner.model.task import load_task
@@ -23,6 +24,8 @@ def _cmd_suite(args: argparse.Namespace) -> int:
     local = args.workers or os.cpu_count() or 1
     executor = RayExecutor(args.ray) if args.ray is not None else LocalExecutor(local)
     say = lambda message: print(message, file=sys.stderr, flush=True)
+    logging.getLogger("regrasp.cache").setLevel(logging.INFO)  # a line per cache entry built (local workers inherit it): a cold
+    # suite's first tasks wait for the grasp lists and roadmaps, and its log shows which
     out = Path(args.out)
     run = run_suite(spec, out, executor, until, args.resume, args.force, local, say)
     report = write_report(run.data, spec, load_task(spec.base_task).environment, out)

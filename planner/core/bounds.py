@@ -1,8 +1,10 @@
-"""The range and unit of every number a user sets: step parameters (declared with `bounded`) and seeds.
+"""The range, unit and meaning of every value a user sets: step parameters (declared with `bounded`, or `described`
+when they are not numbers) and seeds.
 
-A parameter's range sits next to its declaration in its step's parameter dataclass; `--set`, the workbench's inputs
-(their limits and hints) and a session's recorded parameters all read it from there, so one declaration bounds them
-all. The ranges are generous but keep a run's memory and time bounded (a grid step, a node count, a sampling rate).
+A parameter's range, unit, one-line hint and (for a name) its choices sit in its declaration in its step's parameter
+dataclass; `--set`, `regrasp params`, the workbench's inputs (their limits, hints and dropdowns) and a session's
+recorded parameters all read them from there, so one declaration bounds and explains them all. The ranges are
+generous but keep a run's memory and time bounded (a grid step, a node count, a sampling rate).
 """
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-BOUND = "bound"  # the dataclass field metadata key
+BOUND, HINT, CHOICES = "bound", "hint", "choices"  # the dataclass field metadata keys
 
 
 @dataclass(frozen=True)
@@ -39,14 +41,31 @@ def _number(value: float) -> str:
     return str(value) if abs(value) < 10**30 else f"an integer of {abs(value).bit_length()} bits"
 
 
-def bounded(default: float, low: float, high: float, unit: str) -> Any:
-    """A parameter field: its default, the range it accepts and its unit (read back by `field_bound`)."""
-    return dataclasses.field(default=default, metadata={BOUND: Bound(low, high, unit)})
+def bounded(default: float, low: float, high: float, unit: str, hint: str = "") -> Any:
+    """A numeric parameter field: its default, the range it accepts, its unit and what it does in one line (read back by
+    `field_bound` and `field_hint`)."""
+    return dataclasses.field(default=default, metadata={BOUND: Bound(low, high, unit), HINT: hint})
+
+
+def described(default: bool | str, hint: str, choices: tuple[str, ...] = ()) -> Any:
+    """A flag or name parameter field: its default, what it does in one line and, for a name, the values it accepts
+    (none: any text the step checks itself)."""
+    return dataclasses.field(default=default, metadata={HINT: hint, CHOICES: tuple(choices)})
 
 
 def field_bound(field: dataclasses.Field) -> Bound | None:
     """The range a parameter field declares (None: a flag or a name, which has no range)."""
     return field.metadata.get(BOUND)
+
+
+def field_hint(field: dataclasses.Field) -> str:
+    """What a parameter field does, in one line ('' when it declares nothing)."""
+    return field.metadata.get(HINT, "")
+
+
+def field_choices(field: dataclasses.Field) -> tuple[str, ...]:
+    """The values a name parameter accepts (empty: it declares none)."""
+    return field.metadata.get(CHOICES, ())
 
 
 SEED = Bound(0, 2**64 - 1, "")  # a session seed: what numpy's SeedSequence takes and a session file stores

@@ -1,10 +1,13 @@
 """Where regrasp finds its assets, the robot descriptions of example-robot-data, and its cache."""
 from __future__ import annotations
 
+import atexit
 import difflib
 import functools
 import importlib.metadata
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 from planner.core.errors import InputError, RegraspError
@@ -35,6 +38,19 @@ def robot_data_share() -> Path:
 def robot_data_file(relative: str) -> Path:
     """A file inside example-robot-data's `robots/` folder, e.g. 'alex_description/urdf/alex_nub_hands.urdf'."""
     return robot_data_share() / "example-robot-data" / "robots" / relative
+
+
+def temporary_folder(prefix: str) -> Path:
+    """A new temporary folder, deleted with what it holds when this process exits (not when a child forked from it
+    does, which inherits the exit handler): a run that ends without tidying up leaves none behind."""
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
+    atexit.register(_remove_if_owner, folder, os.getpid())
+    return folder
+
+
+def _remove_if_owner(folder: Path, owner: int) -> None:
+    if os.getpid() == owner:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def cache_dir() -> Path:

@@ -3,7 +3,9 @@
 Fields declared with `array(dtype, shape)` go to the step's `.npz` (shape entries: an int, or a
 name like "n" shared between fields (the session fixes "nq" to the robot's DoF), or None for any); every other field must be JSON-able
 (numbers, strings, bools, lists, dicts) and goes to the step's `.json`. Loading checks every
-array's dtype and shape and every JSON field's presence, with errors naming the file and field.
+array's dtype and shape and every JSON field's presence, with errors naming the file and field; a JSON field declared
+with a default was added later: it is written only when it differs from its default, and a file without it (written
+before it) loads with the default.
 """
 from __future__ import annotations
 
@@ -123,7 +125,7 @@ def save_result(result: Any, folder: Path, stem: str) -> list[str]:
         value = getattr(result, f.name)
         if _is_array(f):
             arrays[f.name] = np.ascontiguousarray(value, dtype=np.dtype(f.metadata["dtype"]))
-        else:
+        elif f.default is dataclasses.MISSING or value != f.default:  # a field added later, at its default: as older files have it
             rest[f.name] = value
     buf = io.BytesIO()
     np.savez(buf, **arrays)
@@ -228,9 +230,10 @@ def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | No
         if _is_array(f):
             values[f.name] = _finite(arrays[f.name], npz_path, f.name)
         else:
-            if f.name not in rest:
+            if f.name in rest:
+                values[f.name] = frozen_json(rest[f.name])
+            elif f.default is dataclasses.MISSING:
                 raise InputError(json_path, f.name, "missing field")
-            values[f.name] = frozen_json(rest[f.name])
     unknown = set(rest) - set(values)
     if unknown:
         raise InputError(json_path, sorted(unknown)[0], f"unknown field (this version of {cls.__name__} does not have it)")

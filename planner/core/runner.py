@@ -34,7 +34,7 @@ def run_step(session: Session, step: Step, params: Mapping[str, Any] | None = No
     start = time.perf_counter()
     output = step.run(ctx)
     result = output.result
-    session.record(step, p, seed, time.perf_counter() - start, result, output.stage_seconds)
+    session.record(step, p, seed, time.perf_counter() - start, result, output.stage_seconds, output.cached)
     if os.environ.get(KILL_AFTER) == step.name:
         os.kill(os.getpid(), signal.SIGKILL)
     if getattr(result, "failure", ""):

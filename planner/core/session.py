@@ -2,7 +2,8 @@
 
 `session.json` (written last, atomically) has `format_version`, `task` (the task data in full),
 `robot_spec` (the spec's text), `seed`, `versions` and `steps`: in pipeline order, one
-`{"name", "params", "seed", "seconds", "stats", "files"}` per finished step. `task_meshes.npz`
+`{"name", "params", "seed", "seconds", "stats", "files"}` per finished step (and `stage_seconds`, the seconds of its
+stages, and `"cached": true` when its result was loaded from the user cache, both when they apply). `task_meshes.npz`
 holds every mesh the task names, so a replay needs no task file. `task_source` says where the task came from (a name
 in assets/tasks/ or a path relative to the session): a note for people, never opened (old sessions hold absolute paths). Each step writes
 `<step>.npz` + `<step>.json` (see `results.py`).
@@ -47,7 +48,7 @@ FORMAT_VERSION = 1
 MANIFEST = "session.json"
 MESHES = "task_meshes.npz"
 STEP_KEYS = ("name", "params", "seed", "seconds", "stats", "files")
-OPTIONAL_STEP_KEYS = ("stage_seconds",)
+OPTIONAL_STEP_KEYS = ("stage_seconds", "cached")
 MANIFEST_KEYS = ("format_version", "task", "robot_spec", "robot_spec_name", "seed", "versions", "steps")
 MAX_SPEC_CHARS = 1_000_000
 MAX_KEY_CHARS = 1000  # an embedded mesh's key: the task's mesh value, its scale and up axis
@@ -192,6 +193,8 @@ def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
         plain_name(f, path, f"{field}.files[{k}]")
     if files != step_files(name):
         _fail(path, f"{field}.files", f"expected {step_files(name)}, got {_short(files)}")
+    if "cached" in record:
+        typed(record["cached"], bool, path, f"{field}.cached", "true or false")
     if "stage_seconds" in record:
         for k, t in enumerate(typed(record["stage_seconds"], list, path, f"{field}.stage_seconds", "a list of seconds")):
             checked_seconds(t, path, f"{field}.stage_seconds[{k}]")
@@ -330,15 +333,19 @@ class Session:
             self._results[name] = load_result(step_named(name).result, self.folder, name, {"nq": self.scene.robot.nq}, self._budget)
         return self._results[name]
 
-    def record(self, step: Step, params: Any, seed: int, seconds: float, result: Any, stage_seconds: list[float] = ()) -> None:
+    def record(self, step: Step, params: Any, seed: int, seconds: float, result: Any, stage_seconds: list[float] = (),
+               cached: bool = False) -> None:
         """Save a finished step: its files first, then the manifest (so a crash never lists a half-written step).
-        `stage_seconds` (steps with stages only) are kept in the record, outside the result."""
+        `stage_seconds` (steps with stages only) and whether the result came from the user cache are kept in the
+        record, outside the result."""
         files = save_result(result, self.folder, step.name)
         self._results[step.name] = result
         entry = {"name": step.name, "params": dataclasses.asdict(params), "seed": seed, "seconds": round(seconds, 4),
                  "stats": result.stats(), "files": files}
         if stage_seconds:
             entry["stage_seconds"] = [round(float(t), 4) for t in stage_seconds]
+        if cached:
+            entry["cached"] = True
         order = [s.name for s in PIPELINE]
         steps = [r for r in self.records if r["name"] != step.name] + [entry]
         manifest = {**self.manifest, "steps": sorted(steps, key=lambda r: order.index(r["name"]))}

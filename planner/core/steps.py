@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from planner.core.bounds import Bound, field_bound
+from planner.core.bounds import Bound, field_bound, field_choices
 from planner.core.errors import InputError, RegraspError
 from planner.core.results import MAX_DEPTH, check_nesting, parse_json, read_only
 from planner.model.task import Scene
@@ -51,10 +51,12 @@ class StepContext:
 
 @dataclass(frozen=True)
 class StepOutput:
-    """What a step returns: its result, and apart from it the seconds of its stages (for its session record only)."""
+    """What a step returns: its result, and apart from it what the run measured (for its session record only): the
+    seconds of its stages, and whether the result was loaded from the user cache (its seconds are then not its cost)."""
 
     result: Any
     stage_seconds: tuple[float, ...] = ()
+    cached: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "result", read_only(self.result))  # while it is built: the result as it will be shared
@@ -86,6 +88,7 @@ class Step:
             raise RegraspError(f"step '{self.name}' has no parameter {', '.join(sorted(unknown))} (parameters: {names})")
         defaults = self.params()
         bounds = param_bounds(self.params)
+        choices = {f.name: field_choices(f) for f in dataclasses.fields(self.params)}
         for name, value in values.items():
             expected = type(getattr(defaults, name))
             accepted = (int, float) if expected is float else expected  # a float parameter takes a whole number too
@@ -93,7 +96,7 @@ class Step:
                 raise RegraspError(f"step '{self.name}': parameter {name} expects {expected.__name__}, got {value!r}")
             if isinstance(value, float) and not math.isfinite(value):
                 raise RegraspError(f"step '{self.name}': parameter {name} expects a finite number, got {value!r}")
-            out_of_range = bounds[name].problem(value, "expects a value") if name in bounds else ""
+            out_of_range = bounds[name].problem(value, "expects a value") if name in bounds else choice_problem(choices, name, value)
             if out_of_range:  # checked before float(): a huge whole number is out of range, never an OverflowError
                 raise RegraspError(f"step '{self.name}': parameter {name} {out_of_range}")
             values[name] = expected(value)
@@ -102,6 +105,12 @@ class Step:
         if problem:
             raise RegraspError(f"step '{self.name}': parameter {problem}")
         return params
+
+
+def choice_problem(choices: Mapping[str, tuple[str, ...]], name: str, value: Any) -> str:
+    """What is wrong with a name parameter's value ('' when the parameter declares no choices or the value is one)."""
+    options = choices.get(name, ())
+    return f"expects one of {', '.join(options)}, got {value!r}" if options and value not in options else ""
 
 
 def param_bounds(params: type) -> dict[str, Bound]:

@@ -2,7 +2,8 @@
 
 Caches are disposable: an entry that cannot be read is deleted, recomputed, and the user told so in one line. Entries are
 written atomically, and an entry being computed is locked (`computing`): processes needing the same entry (a suite's
-workers) compute it once, the others wait for it and read it."""
+workers) compute it once, the others wait for it and read it. Building an entry is logged when it starts and when it is
+stored (`building`, at INFO level: `regrasp suite` prints these lines, so a cold run shows what it is waiting for)."""
 from __future__ import annotations
 
 import contextlib
@@ -12,6 +13,7 @@ import io
 import json
 import logging
 import os
+import time
 import zipfile
 import zlib
 from collections.abc import Callable, Iterator, Sequence
@@ -59,6 +61,16 @@ def computing(entry: Path) -> Iterator[None]:
         yield
     finally:
         os.close(fd)
+
+
+@contextlib.contextmanager
+def building(what: str) -> Iterator[None]:
+    """Around the computation and storing of a cache entry (`what` names it): a log line as it starts, and one with its
+    seconds once it is stored (none when it fails)."""
+    log.info("cache: building %s ...", what)
+    start = time.perf_counter()
+    yield
+    log.info("cache: built %s in %.1f s", what, time.perf_counter() - start)
 
 
 def read_cached(files: Sequence[Path], read: Callable[[], T], what: str) -> T | None:

@@ -15,7 +15,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from planner.core.user_cache import cache_key, cache_path, load_arrays, save_arrays
+from planner.core.user_cache import building, cache_key, cache_path, load_arrays, save_arrays
 from planner.model.hand_model import FingerChain, HandModel
 
 CODE_VERSION = "workspace-1"
@@ -110,6 +110,7 @@ def hand_workspaces(hand: HandModel, p: WorkspaceParams = WorkspaceParams()) -> 
     z = load_arrays(path)
     if z is not None:
         return tuple(FingerWorkspace(voxel=p.voxel, **{f: z[f"{i}/{f}"] for f in _FIELDS}) for i in range(len(hand.fingers)))
-    out = tuple(finger_workspace(f, p) for f in hand.fingers)
-    save_arrays(path, {f"{i}/{f}": getattr(w, f) for i, w in enumerate(out) for f in _FIELDS})
+    with building(f"the finger workspaces of the hand {hand.spec.urdf.name} (entry {path.stem})"):
+        out = tuple(finger_workspace(f, p) for f in hand.fingers)
+        save_arrays(path, {f"{i}/{f}": getattr(w, f) for i, w in enumerate(out) for f in _FIELDS})
     return out

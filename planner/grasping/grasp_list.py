@@ -26,7 +26,7 @@ from planner.core.errors import RegraspError
 from planner.core.forked import available_cpus, forked_map
 from planner.core.results import array, load_result, read_only, save_result, writing
 from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
-from planner.core.user_cache import cache_key, cache_path, computing, read_cached
+from planner.core.user_cache import building, cache_key, cache_path, computing, read_cached
 from planner.grasping.finger_workspace import FingerWorkspace, WorkspaceParams, hand_workspaces
 from planner.grasping.frames import box_grid, hopf_rotations
 from planner.grasping.object_model import ObjectModel, mesh_bytes, object_model
@@ -46,31 +46,32 @@ CHUNKS_PER_WORKER = 6
 class GraspParams:
     """Everything a grasp list depends on besides the hand, the mesh and the seed."""
 
-    positions: int = bounded(80, 1, 1000, "positions")  # grasp-frame positions on a grid in the object's bounding box
-    orientations: int = bounded(80, 1, 1000, "orientations")  # per position (incremental SO(3) sequence)
-    mu: float = bounded(0.5, 0.01, 2.0, "(friction coefficient)")
-    cone_edges: int = bounded(8, 3, 64, "edges")  # friction cone linearisation
-    point_step: float = bounded(0.5, 0.2, 5.0, "fingertip radii")  # object point spacing
-    ik_tolerance: float = bounded(2e-4, 1e-5, 0.01, "m")  # fingertip centre to its target
-    ik_iterations: int = bounded(4, 1, 100, "iterations")  # damped least-squares steps from the nearest workspace sample
-    contact_clearance: float = bounded(1e-3, 0.0, 0.01, "m")  # the touching fingertip is shrunk by this for the collision test
-    press_angle: float = bounded(1.4, 0.0, 3.1416, "rad")  # closing motion to inward normal, at most
-    max_candidates: int = bounded(48, 1, 1000, "candidates")  # contact candidates tried per finger and frame
-    ik_batch: int = bounded(16, 1, 1024, "candidates")  # solved per IK batch
-    limit_margin: float = bounded(0.1, 0.0, 0.45, "(fraction)")  # finger joint ranges reduced by this fraction at both ends
-    samples_per_joint: int = bounded(14, 2, 30, "samples")  # workspace sampling (this to the power of a finger's joints)
-    voxel: float = bounded(0.004, 0.001, 0.05, "m")  # workspace grid step
-    max_spheres: int = bounded(40, 1, 1000, "spheres")
-    min_radius: float = bounded(0.006, 0.001, 0.1, "m")
-    w_stability: float = bounded(1.0, 0.0, 100.0, "(weight)")  # quality weights
-    w_com: float = bounded(0.25, 0.0, 100.0, "(weight)")
-    w_ellipsoid: float = bounded(0.25, 0.0, 100.0, "(weight)")
-    w_curvature: float = bounded(0.25, 0.0, 100.0, "(weight)")
-    dedup_distance: float = bounded(0.01, 0.0, 0.1, "m")  # grasps whose contacts are all this close (same fingers) are one grasp
-    # grasps clear of the obstacles at the hand's placement, at least; with fewer (an object lying flat keeps only its grasps from
-    # above), the list is searched again with `densify` times the orientations
-    min_clear: int = bounded(30, 0, 10000, "grasps")
-    densify: int = bounded(3, 1, 20, "(factor)")
+    positions: int = bounded(80, 1, 1000, "positions", "grasp-frame positions on a grid in the object's bounding box")
+    orientations: int = bounded(80, 1, 1000, "orientations", "grasp-frame orientations per position (an incremental SO(3) sequence)")
+    mu: float = bounded(0.5, 0.01, 2.0, "(friction coefficient)", "friction coefficient of the fingertip contacts")
+    cone_edges: int = bounded(8, 3, 64, "edges", "edges of the linearised friction cone")
+    point_step: float = bounded(0.5, 0.2, 5.0, "fingertip radii", "spacing of the object's surface points")
+    ik_tolerance: float = bounded(2e-4, 1e-5, 0.01, "m", "a fingertip centre's distance to its target, at most")
+    ik_iterations: int = bounded(4, 1, 100, "iterations", "damped least-squares steps from the nearest workspace sample")
+    contact_clearance: float = bounded(1e-3, 0.0, 0.01, "m", "the touching fingertip is shrunk by this for the collision test")
+    press_angle: float = bounded(1.4, 0.0, 3.1416, "rad", "angle between the closing motion and the inward normal, at most")
+    max_candidates: int = bounded(48, 1, 1000, "candidates", "contact candidates tried per finger and frame")
+    ik_batch: int = bounded(16, 1, 1024, "candidates", "contact candidates solved per IK batch")
+    limit_margin: float = bounded(0.1, 0.0, 0.45, "(fraction)", "finger joint ranges reduced by this fraction at both ends")
+    samples_per_joint: int = bounded(14, 2, 30, "samples", "finger workspace samples per joint (this to the power of a finger's joints)")
+    voxel: float = bounded(0.004, 0.001, 0.05, "m", "finger workspace grid step")
+    max_spheres: int = bounded(40, 1, 1000, "spheres", "spheres approximating a finger's workspace, at most")
+    min_radius: float = bounded(0.006, 0.001, 0.1, "m", "a finger's workspace spheres stop when the next would be smaller")
+    w_stability: float = bounded(1.0, 0.0, 100.0, "(weight)", "quality weight of the stability score (epsilon over the list's best)")
+    w_com: float = bounded(0.25, 0.0, 100.0, "(weight)", "quality weight of the centre-of-mass score (contacts near the centre of mass)")
+    w_ellipsoid: float = bounded(
+        0.25, 0.0, 100.0, "(weight)", "quality weight of the force-ellipsoid score (normals along each finger's strongest direction)")
+    w_curvature: float = bounded(
+        0.25, 0.0, 100.0, "(weight)", "quality weight of the curvature score (contacts on surfaces the fingertip fits)")
+    dedup_distance: float = bounded(0.01, 0.0, 0.1, "m", "grasps whose contacts (same fingers) are all this close count as one")
+    min_clear: int = bounded(
+        30, 0, 10000, "grasps", "grasps clear of the obstacles at the placement, at least (else searched again, densified)")
+    densify: int = bounded(3, 1, 20, "(factor)", "orientations multiplied by this when fewer than min_clear grasps are clear")
 
     def workspace(self) -> WorkspaceParams:
         return WorkspaceParams(self.limit_margin, self.samples_per_joint, self.voxel, self.max_spheres, self.min_radius)
@@ -254,10 +255,11 @@ def grasp_list(spec: RobotSpec, arm: str, mesh: trimesh.Trimesh, p: GraspParams,
                                  f"grasp list of the {arm} hand")
             if cached is not None:
                 return cached, True
-        result = compute_grasp_list(hand, arm, mesh, p, seed, progress, workers)
-        with writing(folder):
-            folder.mkdir(parents=True, exist_ok=True)
-        save_result(result, folder, "grasps")
+        with building(f"the grasp list of the {arm} hand ({p.positions * p.orientations} frames, entry {key})"):
+            result = compute_grasp_list(hand, arm, mesh, p, seed, progress, workers)
+            with writing(folder):
+                folder.mkdir(parents=True, exist_ok=True)
+            save_result(result, folder, "grasps")
     return read_only(result), False
 
 
@@ -285,15 +287,16 @@ def _step_run(role: str) -> Any:
     def run(ctx: StepContext) -> StepOutput:
         scene, p, seed = ctx.scene, ctx.params, seed_of(ctx.rng)
         arm = getattr(ctx.inputs["arms"], f"{role}_arm")
-        grasps = grasp_list(scene.robot.spec, arm, scene.object_mesh, p, seed, ctx.progress)[0]
+        grasps, cached = grasp_list(scene.robot.spec, arm, scene.object_mesh, p, seed, ctx.progress)
         pose = scene.object_initial if role == "picking" else scene.object_final
         clear = clear_count(scene.robot, grasps, pose, scene.environment)
         if clear < p.min_clear and p.densify > 1:
             ctx.progress(0.0, f"{clear} of {len(grasps)} grasps clear the obstacles at the placement (fewer than {p.min_clear}): "
                               f"searching {p.densify} times the orientations")
-            grasps = grasp_list(scene.robot.spec, arm, scene.object_mesh, dataclasses.replace(p, orientations=p.orientations * p.densify),
-                                seed, ctx.progress)[0]
-        return StepOutput(grasps)
+            grasps, denser_cached = grasp_list(scene.robot.spec, arm, scene.object_mesh,
+                                               dataclasses.replace(p, orientations=p.orientations * p.densify), seed, ctx.progress)
+            cached = cached and denser_cached
+        return StepOutput(grasps, cached=cached)
 
     run.__doc__ = f"The {role} hand's grasp list (paper IV-A)."
     return run

@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from planner.core.user_cache import cache_key, cache_path, load_arrays, save_arrays
+from planner.core.user_cache import building, cache_key, cache_path, load_arrays, save_arrays
 
 CODE_VERSION = "object-model-1"
 LEAF_SIZE = 16
@@ -99,7 +99,8 @@ def object_model(mesh: trimesh.Trimesh, step: float) -> ObjectModel:
     z = load_arrays(path)
     if z is not None:
         return ObjectModel(z["points"], z["normals"], z["curvature"], z["com"], float(z["radius"]), step)
-    model = build_object_model(mesh, step)
-    save_arrays(path, {"points": model.points, "normals": model.normals, "curvature": model.curvature,
-                       "com": model.com, "radius": np.float64(model.radius)})
+    with building(f"the object model of a mesh of {len(mesh.faces):,} faces (entry {path.stem})"):
+        model = build_object_model(mesh, step)
+        save_arrays(path, {"points": model.points, "normals": model.normals, "curvature": model.curvature,
+                           "com": model.com, "radius": np.float64(model.radius)})
     return model

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planner.collision.checker import build_collision_model
-from planner.core.bounds import bounded
+from planner.core.bounds import bounded, described
 from planner.core.errors import RegraspError
 from planner.core.results import array
 from planner.core.steps import Step, StepContext, StepOutput
@@ -31,10 +31,10 @@ FORCE_HINT = "force the arms with --set arms.picking_arm=ARM --set arms.placing_
 
 @dataclass(frozen=True)
 class ArmsParams:
-    seeds: int = bounded(32, 1, 1000, "IK starts")  # per arm and placement
-    tolerance: float = bounded(0.02, 0.001, 0.2, "m")  # fingertip centre to the object's centre of mass
-    picking_arm: str = ""  # force the picking arm (with placing_arm); empty: chosen from reachability and exchange cost
-    placing_arm: str = ""
+    seeds: int = bounded(32, 1, 1000, "IK starts", "IK starts per arm and placement, to find which arm reaches it")
+    tolerance: float = bounded(0.02, 0.001, 0.2, "m", "how close the fingertip centre must come to the object's centre of mass")
+    picking_arm: str = described("", "force the picking arm (with placing_arm); empty: chosen from reachability and exchange cost")
+    placing_arm: str = described("", "force the placing arm (with picking_arm); empty: chosen from reachability and exchange cost")
 
 
 @dataclass(frozen=True)

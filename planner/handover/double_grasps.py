@@ -36,13 +36,14 @@ from planner.model.hand_model import load_hand_model
 
 @dataclass(frozen=True)
 class DoubleGraspParams:
-    count: int = bounded(20, 1, 1000, "double grasps")  # wanted with an exchange configuration (the motion falls back down this list)
-    max_pairs: int = bounded(40, 1, 10000, "pairs")  # tried, best first, before giving up
-    attempts: int = bounded(16, 1, 1000, "configurations")  # exchange configurations sampled per pair
-    position_sigma: float = bounded(0.03, 0.0, 0.5, "m")  # object position around the best exchange node
-    rotation_sigma: float = bounded(0.15, 0.0, 3.1416, "rad")  # object orientation around the one the grasp directions give
-    torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad")
-    hand_margin: float = bounded(0.0, 0.0, 0.5, "m")  # the two hands on the object must be this far apart
+    count: int = bounded(
+        20, 1, 1000, "double grasps", "double grasps wanted with an exchange configuration (the motion falls back down this list)")
+    max_pairs: int = bounded(40, 1, 10000, "pairs", "grasp pairs tried, best first, before giving up")
+    attempts: int = bounded(16, 1, 1000, "configurations", "exchange configurations sampled per pair")
+    position_sigma: float = bounded(0.03, 0.0, 0.5, "m", "spread of the object's position around the best exchange node")
+    rotation_sigma: float = bounded(0.15, 0.0, 3.1416, "rad", "spread of the object's orientation around the one the grasp directions give")
+    torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the torso joints sampled around rest")
+    hand_margin: float = bounded(0.0, 0.0, 0.5, "m", "the two hands on the object must be this far apart")
 
 
 @dataclass(frozen=True)

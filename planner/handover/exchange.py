@@ -29,10 +29,10 @@ from planner.model.task import Scene
 
 @dataclass(frozen=True)
 class ExchangeParams:
-    step: float = bounded(0.05, 0.01, 0.5, "m")  # grid spacing
-    reach_fraction: float = bounded(0.8, 0.1, 1.0, "(fraction)")  # a node is reachable within this fraction of each arm's reach
-    reach_samples: int = bounded(1500, 10, 100000, "configurations")  # arm configurations sampled to estimate an arm's reach
-    keep: int = bounded(5, 1, 1000, "nodes")  # best free nodes kept
+    step: float = bounded(0.05, 0.01, 0.5, "m", "spacing of the exchange grid")
+    reach_fraction: float = bounded(0.8, 0.1, 1.0, "(fraction)", "a node is reachable within this fraction of each arm's reach")
+    reach_samples: int = bounded(1500, 10, 100000, "configurations", "arm configurations sampled to estimate an arm's reach")
+    keep: int = bounded(5, 1, 1000, "nodes", "best free nodes kept")
 
 
 @dataclass(frozen=True)

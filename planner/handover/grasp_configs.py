@@ -34,22 +34,25 @@ from planner.model.task import Scene
 
 @dataclass(frozen=True)
 class GraspConfigParams:
-    attempts: int = bounded(8, 1, 1000, "IK starts")  # body samples (IK starts) tried per grasp with the torso and the free arm near rest
-    # more starts, torso and free arm over their whole ranges, for a grasp the first ones miss
-    wide_attempts: int = bounded(16, 0, 1000, "IK starts")
-    # a grasp stops after this many collision-free configurations; its best-scored one is kept
-    keep: int = bounded(2, 1, 100, "configurations")
-    torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad")  # torso joints sampled around rest
-    free_arm_sigma: float = bounded(0.1, 0.0, 3.1416, "rad")  # the free arm's joints sampled around rest
-    position_tolerance: float = bounded(0.002, 1e-5, 0.05, "m")  # palm to its grasp pose
-    rotation_tolerance: float = bounded(0.02, 1e-4, 0.5, "rad")
-    workers: int = bounded(2, 1, 64, "processes")  # the two hands run in parallel
-    # per start (converging solves take ~6, 13 at the 90th percentile on the default task)
-    ik_iterations: int = bounded(30, 1, 1000, "iterations")
-    arm_weight: float = bounded(1.0, 0.0, 100.0, "(weight)")  # configuration score weights (config_score.py)
-    free_weight: float = bounded(1.0, 0.0, 100.0, "(weight)")
-    joint_scale: float = bounded(0.5, 0.01, 10.0, "rad")
-    length_scale: float = bounded(0.1, 0.001, 10.0, "m")
+    attempts: int = bounded(8, 1, 1000, "IK starts", "IK starts per grasp, torso and free arm near rest")
+    wide_attempts: int = bounded(
+        16, 0, 1000, "IK starts", "more IK starts, torso and free arm over their whole ranges, for a grasp the first ones miss")
+    keep: int = bounded(
+        2, 1, 100, "configurations", "a grasp stops after this many collision-free configurations; its best-scored one is kept")
+    torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the torso joints sampled around rest")
+    free_arm_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the free arm's joints sampled around rest")
+    position_tolerance: float = bounded(0.002, 1e-5, 0.05, "m", "palm position to its grasp pose, at most")
+    rotation_tolerance: float = bounded(0.02, 1e-4, 0.5, "rad", "palm orientation to its grasp pose, at most")
+    workers: int = bounded(2, 1, 64, "processes", "worker processes (the two hands are searched in parallel)")
+    # converging solves take ~6 iterations, 13 at the 90th percentile on the default task
+    ik_iterations: int = bounded(30, 1, 1000, "iterations", "IK iterations per start")
+    arm_weight: float = bounded(
+        1.0, 0.0, 100.0, "(weight)", "configuration score weight of the grasping arm (its approach towards the robot's base)")
+    free_weight: float = bounded(
+        1.0, 0.0, 100.0, "(weight)", "configuration score weight of the free arm (near rest, wrist at its rest height, by the torso)")
+    joint_scale: float = bounded(0.5, 0.01, 10.0, "rad", "free-arm joint distance to rest worth one unit of penalty")
+    length_scale: float = bounded(
+        0.1, 0.001, 10.0, "m", "free-arm wrist height change or distance to the torso plane worth one unit of penalty")
 
     def weights(self) -> ScoreWeights:
         return ScoreWeights(self.arm_weight, self.free_weight, self.joint_scale, self.length_scale)

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planner.core.bounds import bounded
+from planner.core.bounds import bounded, described
 from planner.core.results import array
 from planner.motion.phase import Phase
 
@@ -17,7 +17,8 @@ PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "cont
 
 @dataclass(frozen=True)
 class MotionParams:
-    planner: str = "roadmap"  # 'roadmap' (Super Graph, lazy revalidation, RRT reconnection) or 'rrt' (RRTConnect alone: the baseline)
+    planner: str = described("roadmap", "roadmap: Super Graph, lazy revalidation, RRT reconnection; rrt: RRTConnect alone (baseline)",
+                             PLANNERS)
     pregrasp_distance: float = bounded(0.06, 0.0, 0.5, "m")  # a hand backs off this far along its approach direction before it approaches
     # the object is lifted off and set down by this much (or twice), vertically where that is free
     lift: float = bounded(0.06, 0.001, 0.5, "m")
@@ -80,7 +81,8 @@ class MotionParams:
 @dataclass(frozen=True)
 class Motion:
     """A trajectory sampled at `rate`: time, configuration, phase (0..3: Grasp, Carry, Place, Rest), the object's world
-    pose, which arm holds it (-1: none) and which arm's hand works at the object (-1: none), each wrist's position;
+    pose, which arm holds it (-1: none) and which arm's hand works at the object (-1: none), each wrist's position, and
+the names of q's columns;
     `keyframes` are the samples at q_initial, q_grasp, q_exch, q_place and q_final (a direct transfer, one arm carrying
     the object, has no exchange: Carry takes it to above the placement, and its q_exch keyframe is q_place's). `phases`
     holds Table I's counts per phase (seconds are in the session record)."""
@@ -102,6 +104,7 @@ class Motion:
     active: np.ndarray = array("int8", ("n",))  # the arm whose hand works at the object (approach, closing, lift, ...), -1
     wrists: np.ndarray = array("float64", ("n", 2, 3))
     keyframes: np.ndarray = array("int64", (5,))
+    joint_names: tuple = ()  # the robot's joints in q's column order (absent from sessions older than it: see joint_names_of)
 
     @property
     def duration(self) -> float:

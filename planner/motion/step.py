@@ -107,7 +107,7 @@ def _empty(p: MotionParams, robot, tried: list, resolution: dict, failure: str) 
     nq = robot.nq
     return Motion(p.planner, -1, tried, [], list(robot.spec.arm_names), resolution, [], failure, np.zeros(0), np.zeros((0, nq)),
                   np.zeros(0, np.int8), np.zeros((0, 4, 4)), np.zeros(0, np.int8), np.zeros(0, np.int8), np.zeros((0, 2, 3)),
-                  np.zeros(5, np.int64))
+                  np.zeros(5, np.int64), tuple(robot.joint_names()))
 
 
 def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, resolution: dict, planner: DoubleGraspPlanner,
@@ -154,7 +154,8 @@ def _sampled(scene: Scene, pieces: list[Piece], p: MotionParams, tried: list, re
     stages.append({"stage": "timing and sampling", "count": len(q),
                    "note": f"{sum(k for _, _, k in out.figures)} parabolic shortcuts, samples at {p.rate:g} Hz"})
     return Motion(p.planner, len(tried) - 1, tried, table, arms, resolution, stages, "", t, q, phase_arr, np.array(poses),
-                  np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64))
+                  np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64),
+                  tuple(robot.joint_names()))
 
 
 def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: list[Piece], smoothing_checks: int) -> dict:

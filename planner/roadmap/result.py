@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planner.core.bounds import bounded
+from planner.core.bounds import bounded, described
 from planner.core.results import array
 
 
@@ -13,15 +13,16 @@ from planner.core.results import array
 class RoadmapParams:
     """How the offline roadmap is built (all part of its cache key)."""
 
-    nodes: int = bounded(50, 2, 500, "nodes")  # per elementary roadmap (Vis-PRM stops there)
-    radius: float = bounded(3.0, 0.01, 20.0, "rad")  # a guard's visibility range (joint-space distance over a sub-system's joints)
-    max_failures: int = bounded(300, 1, 100000, "samples")  # Vis-PRM also stops after this many useless samples in a row
-    env_padding: float = bounded(0.03, 0.001, 0.2, "m")  # robot-obstacle pairs are checked as colliding closer than this ...
-    env_clearance: float = bounded(0.01, 0.0, 0.2, "m")  # ... and keep this distance along every motion (the project's margin)
-    self_padding: float = bounded(0.015, 0.001, 0.2, "m")  # robot-robot pairs are checked colliding closer than this, and keep >= 0
-    mixed_edges: bool = False  # also SG edges whose common part switches source along two elementary edges
-    one_arm_edges: bool = True  # also SG edges moving one arm along its elementary edge, the other still
-    tree: bool = False  # the tree variant: SG edges only between different connected components
+    nodes: int = bounded(50, 2, 500, "nodes", "nodes per elementary roadmap (Vis-PRM stops there)")
+    radius: float = bounded(3.0, 0.01, 20.0, "rad", "a guard's visibility range (joint-space distance over a sub-system's joints)")
+    max_failures: int = bounded(300, 1, 100000, "samples", "Vis-PRM also stops after this many useless samples in a row")
+    env_padding: float = bounded(0.03, 0.001, 0.2, "m", "robot-obstacle pairs count as colliding closer than this at checks")
+    env_clearance: float = bounded(0.01, 0.0, 0.2, "m", "robot-obstacle distance kept along every motion (between checks)")
+    self_padding: float = bounded(
+        0.015, 0.001, 0.2, "m", "robot-robot pairs count as colliding closer than this (and keep >= 0 between checks)")
+    mixed_edges: bool = described(False, "also Super Graph edges whose common part switches source along two elementary edges")
+    one_arm_edges: bool = described(True, "also Super Graph edges moving one arm along its elementary edge, the other still")
+    tree: bool = described(False, "the tree variant: Super Graph edges only between different connected components")
 
     def problem(self) -> str:
         """What is wrong between the values, naming the parameter ('' when nothing): checked before the step runs."""

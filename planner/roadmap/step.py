@@ -8,8 +8,8 @@ import numpy as np
 from planner.collision.pairs import CODE_VERSION as PAIRS_VERSION
 from planner.core.results import load_result, read_only, save_result
 from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progress, step_seed
+from planner.core.user_cache import building, cache_path, computing, read_cached
 from planner.core.user_cache import cache_key as hash_key
-from planner.core.user_cache import cache_path, computing, read_cached
 from planner.model.task import Scene
 from planner.roadmap.build import build_roadmap
 from planner.roadmap.result import Roadmap, RoadmapParams
@@ -39,8 +39,9 @@ def roadmap_for(scene: Scene, params: RoadmapParams, seed: int, use_cache: bool 
                                  lambda: load_result(Roadmap, path.parent, path.name), "roadmap")
             if cached is not None:
                 return cached, {}
-        roadmap, seconds = build_roadmap(scene, params, seed, progress)
-        save_result(roadmap, path.parent, path.name)
+        with building(f"the roadmap ({params.nodes} nodes per elementary roadmap, entry {path.name})"):
+            roadmap, seconds = build_roadmap(scene, params, seed, progress)
+            save_result(roadmap, path.parent, path.name)
     return read_only(roadmap), seconds
 
 
@@ -56,7 +57,7 @@ def session_roadmap_seed(session_seed: int) -> int:
 
 def run(ctx: StepContext) -> StepOutput:
     roadmap, seconds = roadmap_for(ctx.scene, ctx.params, seed_of(ctx.rng), progress=ctx.progress)
-    return StepOutput(roadmap, tuple(seconds.values()))
+    return StepOutput(roadmap, tuple(seconds.values()), cached=not seconds)
 
 
 NAME = "roadmap"

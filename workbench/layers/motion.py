@@ -19,6 +19,7 @@ from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.model.task import Scene
 from planner.motion.result import PHASE_SECONDS, PHASES, Motion
+from planner.motion.trajectory_file import trajectory_of, trajectory_text
 
 from ..meshes import matrix_wxyz
 from ..notify import error_text
@@ -33,6 +34,7 @@ PHASE_COLOR_NAMES = ("teal", "violet", "magenta", "grey")
 ROUTE_THICKNESS = 0.004  # m
 FPS = 30.0  # frames a second at most while playing (samples are skipped when the trajectory's rate or the speed is higher)
 SPEEDS = (0.1, 4.0)  # playback speed range (1 = real time)
+TRAJECTORY_FORMATS = ("JSON", "CSV")  # the trajectory downloads (planner/motion/trajectory_file.py), by the button's label
 KEYFRAMES = ("initial", "q_grasp", "q_exch", "q_place", "final")  # `Motion.keyframes` (not "exchange": the Double grasps folder has it)
 
 
@@ -88,6 +90,7 @@ class MotionLayer(StepLayer):
         self.jump: viser.GuiButtonGroupHandle | None = None
         self.now: viser.GuiMarkdownHandle | None = None
         self.export_button: viser.GuiButtonHandle | None = None
+        self.trajectory_buttons: viser.GuiButtonGroupHandle | None = None
         self._generation = 0  # bumped to stop a running playback
         self._frame_lock = threading.Lock()  # a playback frame and pause / removal never interleave
 
@@ -101,7 +104,7 @@ class MotionLayer(StepLayer):
                 handle.remove()
         self.object = self.routes = None
         self.result, self.index, self.poses = result, 0, {}
-        self.timeline = self.speed = self.play_button = self.jump = self.now = None
+        self.timeline = self.speed = self.play_button = self.jump = self.now = self.trajectory_buttons = None
         if len(result.t):
             self._draw_routes(result)
         if len(result.t) and self.workbench is None:  # in an HTML export; the live workbench's object is moved instead
@@ -155,6 +158,9 @@ class MotionLayer(StepLayer):
                 if self.session is not None:
                     self.export_button = gui.add_button("Export animation", hint="Download the whole motion as one HTML "
                                                         "file that plays offline (10 frames a second at most)")
+                    self.trajectory_buttons = gui.add_button_group("Trajectory", TRAJECTORY_FORMATS, hint=(
+                        "Download the motion as a trajectory file (joint names, time, positions, velocities, phase, holder, "
+                        "object pose): JSON shaped as a ROS JointTrajectory, or CSV (docs/sessions.md)"))
             gui.add_markdown(self.summary(result))
         if self.timeline is not None and self.play_button is not None and self.jump is not None:
             self.timeline.on_update(lambda e: self.show(int(e.target.value)))
@@ -162,6 +168,8 @@ class MotionLayer(StepLayer):
             self.jump.on_click(lambda e: self.seek(int(self.result.keyframes[KEYFRAMES.index(e.target.value)])))
         if self.export_button is not None:
             self.export_button.on_click(lambda e: self.export(e.client))
+        if self.trajectory_buttons is not None:
+            self.trajectory_buttons.on_click(lambda e: self.download_trajectory(e.client, e.target.value))
 
     # -- the current sample ----------------------------------------------------------------------
 
@@ -278,6 +286,18 @@ class MotionLayer(StepLayer):
         job = threading.Thread(target=self._export, args=(client, self.session, self.export_button), daemon=True)
         job.start()
         return job
+
+    def download_trajectory(self, client: viser.ClientHandle | None, label: str) -> None:
+        """Send the drawn session's motion to `client` as a trajectory file in the format `label` names (JSON or CSV)."""
+        if self.session is None or client is None or label not in TRAJECTORY_FORMATS:
+            return
+        suffix = f".{label.lower()}"
+        try:
+            text = trajectory_text(trajectory_of(self.session), suffix)
+        except Exception as exc:  # shown, never raised into viser's callback thread
+            client.add_notification("Trajectory export failed", error_text(exc), color="red", auto_close_seconds=10.0)
+            return
+        client.send_file_download(f"{self.session.folder.name}-trajectory{suffix}", text.encode(), save_immediately=True)
 
     @staticmethod
     def _export(client: viser.ClientHandle, session: Session, button: viser.GuiButtonHandle) -> None:
