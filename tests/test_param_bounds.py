@@ -153,15 +153,10 @@ def test_a_grid_too_fine_for_the_box_is_refused_before_it_is_made() -> None:
     assert len(grid_nodes(lower, upper, fits)) <= MAX_GRID_NODES
 
 
-HINTLESS = {"motion"}  # MotionParams still explains its numbers in comments (to move into `bounded` once its timing work lands)
-
-
 def test_every_parameter_declares_a_one_line_hint() -> None:
     for step in PIPELINE:
         for f in dataclasses.fields(step.params):
             hint = field_hint(f)
-            if step.name in HINTLESS and f.name != "planner":
-                continue
             assert hint.strip() and "\n" not in hint and len(hint) <= 120, f"{step.name}.{f.name}: {hint!r}"
 
 

@@ -19,54 +19,36 @@ PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "cont
 class MotionParams:
     planner: str = described("roadmap", "roadmap: Super Graph, lazy revalidation, RRT reconnection; rrt: RRTConnect alone (baseline)",
                              PLANNERS)
-    pregrasp_distance: float = bounded(0.06, 0.0, 0.5, "m")  # a hand backs off this far along its approach direction before it approaches
-    # the object is lifted off and set down by this much (or twice), vertically where that is free
-    lift: float = bounded(0.06, 0.001, 0.5, "m")
-    lift_candidates: int = bounded(8, 1, 100, "motions")  # lift and set-down motions tried, freest first
-    # fingers before an approach: this fraction of the way from the grasp to the open hand
-    preshape: float = bounded(1.0, 0.0, 1.0, "(fraction)")
-    # fingers letting go: this fraction of the way open before the hand retreats (then fully open)
-    release: float = bounded(0.6, 0.0, 1.0, "(fraction)")
-    straight_steps: int = bounded(4, 1, 100, "waypoints")  # IK waypoints on each straight hand motion
-    max_velocity: float = bounded(1.0, 0.01, 20.0, "rad/s")  # joint speeds are capped here (and by the robot's own limits)
-    max_acceleration: float = bounded(2.0, 0.01, 100.0, "rad/s^2")
-    rate: float = bounded(30.0, 1.0, 1000.0, "Hz")  # the trajectory's sampling rate
-    # transit: edges joining each end to the graph, nearest valid nodes first (checked until one is valid; the rest when a path takes
-    # them) ...
-    connections: int = bounded(4, 1, 100, "edges")
-    max_connections: int = bounded(48, 1, 1000, "nodes")  # ... among at most this many nearest nodes tried
-    max_searches: int = bounded(60, 1, 10000, "searches")  # transit: graph searches after invalidations before reconnecting
-    max_reconnections: int = bounded(2, 0, 100, "calls")  # transit: RRTConnect calls per query (then the next candidate end is tried) ...
-    # ... and per phase, over all its queries (then they search the graph only: a double grasp whose transit cannot be found gives up
-    # after a few seconds instead of reconnecting to every candidate end)
-    phase_reconnections: int = bounded(4, 0, 1000, "calls")
-    # motion checks one RRTConnect reconnection may make (a budget in checks, unlike one in seconds, gives the same result on any machine)
-    reconnect_motions: int = bounded(1000, 1, 1000000, "motion checks")
-    rrt_motions: int = bounded(20000, 1, 1000000, "motion checks")  # checks one RRTConnect query of the baseline planner ('rrt') may make
-    rrt_step: float = bounded(0.5, 0.01, 10.0, "rad")  # RRTConnect's range (longest extension, joint-space distance)
-    # random shortcuts per transit, after the greedy ones between its vertices (measured on seeds 0-9: 16 of them shortened the
-    # joint-space length by a sixth and the duration by 4%, for 10% more checks)
-    shortcut_attempts: int = bounded(30, 0, 10000, "shortcuts")
-    shortcut_min_gain: float = bounded(0.1, 0.0, 10.0, "rad")  # a shortcut shortening the path (joint-space length) by less is not checked
-    # timing: random parabolic shortcuts tried over the whole motion, each checked before it is kept, and the collision checks
-    # all the smoothing may make (shared among the runs between two rests in proportion to how long they take before it)
-    smooth_attempts: int = bounded(1200, 0, 1000000, "shortcuts")
-    smooth_checks: int = bounded(14000, 0, 100000000, "collision checks")
-    smooth_min_gain: float = bounded(0.02, 0.0, 10.0, "s")  # a parabolic shortcut saving less time is not checked
-    # transit: an end the graph cannot reach is reconnected to this many of its nearest valid nodes
-    goal_nodes: int = bounded(16, 1, 1000, "nodes")
-    max_double_grasps: int = bounded(20, 1, 1000, "double grasps")  # tried, best first
-    # transit checks: obstacles count as hit this close (clearance: the roadmap's), robot-robot and robot-object pairs at
-    # transit_self_padding likewise (both lowered per transit, pair by pair, to what its two ends allow)
-    transit_env_padding: float = bounded(0.03, 0.001, 0.2, "m")
-    transit_self_padding: float = bounded(0.015, 0.001, 0.2, "m")
-    # contact motions (approach, closing, lift ...) keep obstacles this far at checks
-    contact_env_padding: float = bounded(0.008, 0.001, 0.05, "m")
-    contact_env_clearance: float = bounded(0.004, 0.0, 0.05, "m")  # ... and this far between checks
-    contact_penetration: float = bounded(0.001, 1e-5, 0.01, "m")  # hand-object pairs touch at most (0 at checks, this deep between checks)
-    # contact motions are checked first at every this-many-th configuration with margins this many times wider, densely only next to
-    # one that comes closer: the same guarantee in fewer checks (1: densely throughout)
-    contact_coarse: int = bounded(3, 1, 100, "(factor)")
+    pregrasp_distance: float = bounded(0.06, 0.0, 0.5, "m", "a hand backs off this far along its approach direction before it approaches")
+    lift: float = bounded(0.06, 0.001, 0.5, "m", "the object is lifted off and set down by this much (or twice), vertically where free")
+    lift_candidates: int = bounded(8, 1, 100, "motions", "lift and set-down motions tried, freest first")
+    preshape: float = bounded(1.0, 0.0, 1.0, "(fraction)", "fingers before an approach: this fraction of the way from the grasp to open")
+    release: float = bounded(0.6, 0.0, 1.0, "(fraction)", "fingers letting go: this fraction of the way open before the hand retreats")
+    straight_steps: int = bounded(4, 1, 100, "waypoints", "IK waypoints on each straight hand motion")
+    max_velocity: float = bounded(1.0, 0.01, 20.0, "rad/s", "joint speeds are capped here (and by the robot's own limits)")
+    max_acceleration: float = bounded(2.0, 0.01, 100.0, "rad/s^2", "joint accelerations are capped here")
+    rate: float = bounded(30.0, 1.0, 1000.0, "Hz", "the trajectory's sampling rate")
+    connections: int = bounded(4, 1, 100, "edges", "transit: edges joining each end to the graph, nearest valid nodes first")
+    max_connections: int = bounded(48, 1, 1000, "nodes", "transit: nearest nodes tried for those edges")
+    max_searches: int = bounded(60, 1, 10000, "searches", "transit: graph searches after invalidations before reconnecting")
+    max_reconnections: int = bounded(2, 0, 100, "calls", "transit: RRTConnect calls per query (then the next candidate end)")
+    phase_reconnections: int = bounded(4, 0, 1000, "calls", "transit: RRTConnect calls per phase (then its queries search the graph only)")
+    reconnect_motions: int = bounded(1000, 1, 1000000, "motion checks", "a budget of one RRTConnect reconnection (counts: any machine)")
+    rrt_motions: int = bounded(20000, 1, 1000000, "motion checks", "a budget of one RRTConnect query of the baseline planner 'rrt'")
+    rrt_step: float = bounded(0.5, 0.01, 10.0, "rad", "RRTConnect's range (longest extension, joint-space distance)")
+    shortcut_attempts: int = bounded(30, 0, 10000, "shortcuts", "random straight shortcuts per transit, after the greedy ones")
+    shortcut_min_gain: float = bounded(0.1, 0.0, 10.0, "rad", "a straight shortcut shortening the path by less is not checked")
+    smooth_attempts: int = bounded(1200, 0, 1000000, "shortcuts", "random parabolic shortcuts over the whole motion (shared by its runs)")
+    smooth_checks: int = bounded(14000, 0, 100000000, "collision checks", "all the smoothing may make (shared by its runs)")
+    smooth_min_gain: float = bounded(0.02, 0.0, 10.0, "s", "a parabolic shortcut saving less time is not checked")
+    goal_nodes: int = bounded(16, 1, 1000, "nodes", "transit: an end the graph cannot reach is reconnected to this many nodes")
+    max_double_grasps: int = bounded(20, 1, 1000, "double grasps", "tried, best first")
+    transit_env_padding: float = bounded(0.03, 0.001, 0.2, "m", "transit checks: obstacles count as hit this close (lowered per end)")
+    transit_self_padding: float = bounded(0.015, 0.001, 0.2, "m", "transit checks: robot-robot and robot-object pairs likewise")
+    contact_env_padding: float = bounded(0.008, 0.001, 0.05, "m", "contact motions keep obstacles this far at checks")
+    contact_env_clearance: float = bounded(0.004, 0.0, 0.05, "m", "... and this far between checks")
+    contact_penetration: float = bounded(0.001, 1e-5, 0.01, "m", "hand-object pairs touch at most this deep between checks (0 at them)")
+    contact_coarse: int = bounded(3, 1, 100, "(factor)", "contact checks at every k-th configuration with k-times margins first (1: dense)")
 
     def problem(self) -> str:
         """What is wrong with the values, naming the parameter ('' when nothing): checked before the step runs."""
