@@ -12,7 +12,6 @@ import pytest
 from oracle import Oracle
 from scipy.optimize import linprog
 
-from planner.collision.checker import build_collision_model
 from planner.collision.validity import Profile, make_validity
 from planner.motion.ramps import min_times, ramp
 from planner.motion.trajectory import Trajectory, rest_to_rest, trapezoid

@@ -4,8 +4,9 @@ One joint goes from (x0, v0) to (x1, v1) with |v| <= vmax and |a| <= amax by a r
 cruising velocity, cruise, constant acceleration to v1 (either ramp may be empty, the cruise too). Its shortest
 duration is the bang-bang profile (or the bang-cruise-bang one when the peak would pass vmax). Several joints move
 together: the slowest joint sets the duration T, and every other joint takes, for that T, the ramp of least
-acceleration (closed forms, see fixed_time). Some T above a joint's shortest duration admit no ramp (Hauser's inoperative intervals, when v0 and v1
-point away from the goal): the duration is then lengthened step by step, and a ramp none admits is not made.
+acceleration (closed forms, see fixed_time). Some T above a joint's shortest duration admit no ramp (Hauser's
+inoperative intervals, when v0 and v1 point away from the goal): the duration is then lengthened step by step, and a
+ramp none admits is not made.
 """
 from __future__ import annotations
 
