@@ -618,9 +618,10 @@ def test_transit_checks_count_every_collision_check_of_the_transit(example, monk
     robot = scene.robot
     motion = Session.open(EXAMPLE).result("motion")
     rest = np.flatnonzero(motion.phase == PHASES.index("Rest"))
-    start = motion.q[rest[0] - 1]
+    start = motion.q[rest[0] - 1]  # the placing hand a few centimetres from the object
     hands = np.concatenate(list(robot.hand_idx.values()))
-    goal = motion.q[rest[np.flatnonzero(np.all(motion.q[rest][:, hands] == start[hands], axis=1))[-1]]]
+    goal = scene.q_final.copy()
+    goal[hands] = start[hands]
     planner = _phase_planner(scene, roadmap, baseline)
     calls = []
     check = CollisionChecker.in_collision

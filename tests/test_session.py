@@ -56,7 +56,7 @@ def test_round_trip_every_step_exactly(planned):
     manifest = json.loads((folder / MANIFEST).read_text())
     assert {"format_version", "task", "versions", "steps"} <= set(manifest)
     keys = {"name", "params", "seed", "seconds", "stats", "files"}
-    assert [set(r) - {"stage_seconds"} for r in manifest["steps"]] == [keys] * len(PIPELINE)
+    assert [set(r) - {"stage_seconds", "cached"} for r in manifest["steps"]] == [keys] * len(PIPELINE)
 
 
 def test_replay_calls_no_planner_step(example):
