@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from planner.model.environment import Environment
     from planner.model.robot import Robot
 
-CODE_VERSION = "grasps-2"  # 2: no seconds in the list
+CODE_VERSION = "grasps-3"  # 2: no seconds in the list; 3: frames rejected before the search have their own outcomes
 CHUNKS_PER_WORKER = 6
 
 
@@ -188,7 +188,7 @@ def _run_frames(search: GraspSearch, frames: np.ndarray, workers: int, progress:
         out.extend(part)
         progress(len(out) / len(frames), f"{len(out)} of {len(frames)} frames")
 
-    forked_map(lambda chunk: [search.at_frame(H) for H in chunk], chunks, workers, arrived)
+    forked_map(search.grasps, chunks, workers, arrived)
     return out
 
 

@@ -1,0 +1,160 @@
+"""`regrasp bench grasps`: each hand's grasp list timed, side by side with the list builder of an earlier commit.
+
+The earlier builder runs from a git worktree of that commit (made in a scratch folder and removed
+after), in a subprocess whose PYTHONPATH is that worktree, on the same task, parameters and seed,
+one hand after the other in turn with this code's builder. Neither reads a cached list; the object
+model and the finger workspaces (whose code is the same in both) are made before either is timed.
+Reported per hand: frames tried, frames left after each stage of the search, grasps, seconds and
+grasps per second, and the ratio of grasps per second to the earlier builder's.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from planner.core.errors import RegraspError
+from planner.grasping.finger_workspace import hand_workspaces
+from planner.grasping.grasp_list import GraspParams, compute_grasp_list, search_object
+from planner.grasping.object_model import mesh_bytes
+from planner.grasping.search import OUTCOMES
+from planner.model.hand_model import load_hand_model
+from planner.model.task import Scene
+
+BASELINE = "4a3c6ac"  # the last commit whose grasp search ran frame by frame (issue 38)
+REPO = Path(__file__).resolve().parents[2]
+
+# Run by the earlier code (its own modules, on its PYTHONPATH): one hand's list, timed, and the mesh's digest.
+BASELINE_SCRIPT = """
+import hashlib, json, sys, time
+from planner.grasping.grasp_list import GraspParams, compute_grasp_list
+from planner.grasping.object_model import mesh_bytes
+from planner.model.task import load_task
+a = json.loads(sys.argv[1])
+scene = load_task(a["task"])
+start = time.perf_counter()
+r = compute_grasp_list(scene.robot.spec.arm(a["hand"]).hand, a["hand"], scene.object_mesh, GraspParams(**a["params"]), a["seed"],
+                       workers=a["workers"])
+print(json.dumps({"seconds": time.perf_counter() - start, "grasps": len(r), "frames": r.frames_tried,
+                  "outcomes": r.outcomes, "mesh": hashlib.sha256(mesh_bytes(scene.object_mesh)).hexdigest()}))
+"""
+
+
+@dataclass(frozen=True)
+class HandBench:
+    """One hand's list: this code's figures and, when measured, the earlier builder's."""
+
+    hand: str
+    frames: int
+    stages: dict  # stage -> frames left after it, in search order
+    grasps: int
+    seconds: float
+    baseline: dict | None  # the earlier builder's grasps, frames, seconds and outcomes
+
+    @property
+    def grasps_per_second(self) -> float:
+        return self.grasps / max(self.seconds, 1e-9)
+
+    @property
+    def ratio(self) -> float | None:
+        """Grasps per second over the earlier builder's (None without it)."""
+        if not self.baseline:
+            return None
+        return self.grasps_per_second / max(self.baseline["grasps"] / max(self.baseline["seconds"], 1e-9), 1e-9)
+
+
+@dataclass(frozen=True)
+class GraspBench:
+    """The benchmark of one task: every hand asked for."""
+
+    task: str
+    seed: int
+    workers: int
+    baseline_commit: str | None
+    hands: list
+
+    def to_dict(self) -> dict:
+        return {"task": self.task, "seed": self.seed, "workers": self.workers, "baseline_commit": self.baseline_commit,
+                "hands": [{**asdict(h), "grasps_per_second": h.grasps_per_second, "ratio": h.ratio} for h in self.hands]}
+
+    def render(self) -> str:
+        out = [f"grasp lists of {self.task} (seed {self.seed}, {self.workers} worker(s))"]
+        for h in self.hands:
+            out += ["", f"{h.hand} hand", f"{'frames tried':<34}{h.frames:>8}"]
+            out += [f"{'  left after ' + stage:<34}{left:>8}" for stage, left in h.stages.items()]
+            out += [f"{'grasps':<34}{h.grasps:>8}", f"{'seconds':<34}{h.seconds:>8.2f}",
+                    f"{'grasps per second':<34}{h.grasps_per_second:>8.2f}"]
+            if h.baseline:
+                b = h.baseline
+                out += [f"{self.baseline_commit} grasps, seconds, grasps/s".ljust(34)
+                        + f"{b['grasps']:>8}{b['seconds']:>9.2f}{b['grasps'] / max(b['seconds'], 1e-9):>9.2f}",
+                        f"{'ratio of grasps per second':<34}{h.ratio:>8.2f}"]
+        return "\n".join(out)
+
+
+def stages(frames: int, outcomes: dict) -> dict:
+    """Frames left after each stage of the search: each outcome but the last removes its frames."""
+    left, out = frames, {}
+    for name in OUTCOMES[:-1]:
+        left -= outcomes.get(name, 0)
+        out[name] = left
+    return out
+
+
+def baseline_worktree(commit: str, folder: Path) -> Path:
+    """A detached git worktree of `commit` in `folder` (this checkout's repository); one line when git cannot make it."""
+    path = folder / "baseline"
+    done = subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(path), commit], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RegraspError(f"cannot check out the baseline commit '{commit}' from {REPO}: "
+                           f"{(done.stderr.strip().splitlines() or ['git failed'])[-1]}")
+    return path
+
+
+def run_baseline(code: Path, task: Path, hand: str, params: dict, seed: int, workers: int) -> dict:
+    """The earlier builder's figures for one hand, from a subprocess running the code in `code`."""
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    arguments = json.dumps({"task": str(task), "hand": hand, "params": params, "seed": seed, "workers": workers})
+    done = subprocess.run([sys.executable, "-c", BASELINE_SCRIPT, arguments], cwd=code, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RegraspError(f"the baseline builder failed on the {hand} hand: {(done.stderr.strip().splitlines() or ['?'])[-1]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def bench_grasps(scene: Scene, task: Path, hands: list[str], seed: int, workers: int, baseline: str | None,
+                 progress=print) -> GraspBench:
+    """Time each hand's list with this code and (unless `baseline` is None) with the builder of commit `baseline`."""
+    p = GraspParams()
+    params = {name: getattr(p, name) for name in p.__dataclass_fields__}
+    digest = hashlib.sha256(mesh_bytes(scene.object_mesh)).hexdigest()
+    with tempfile.TemporaryDirectory(prefix="regrasp-bench-grasps-") as tmp:
+        code = baseline_worktree(baseline, Path(tmp)) if baseline else None
+        try:
+            out = []
+            for hand in hands:
+                spec = scene.robot.spec.arm(hand).hand
+                model = load_hand_model(spec)
+                search_object(scene.object_mesh, [f.tip_radius for f in model.fingers], p)  # made (and cached) untimed
+                hand_workspaces(model, p.workspace())
+                before = None
+                if code is not None:
+                    progress(f"{hand} hand: the {baseline} builder ...")
+                    before = run_baseline(code, task, hand, params, seed, workers)
+                    if before.pop("mesh") != digest:
+                        raise RegraspError(f"the baseline builder read another mesh for {task}")
+                progress(f"{hand} hand: this builder ...")
+                start = time.perf_counter()
+                result = compute_grasp_list(spec, hand, scene.object_mesh, p, seed, workers=workers)
+                seconds = time.perf_counter() - start
+                out.append(HandBench(hand, result.frames_tried, stages(result.frames_tried, result.outcomes), len(result),
+                                     seconds, before))
+        finally:
+            if code is not None:
+                subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(code)], capture_output=True)
+    return GraspBench(scene.name, seed, workers, baseline, out)
