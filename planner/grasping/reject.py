@@ -1,8 +1,7 @@
 """Grasp frames dropped before any finger search, in one pass over all frames, each by the first test it fails.
 
-In order: the palm inside the object (a body shape's centre behind the tangent plane of its nearest
-object point and farther from it than the points' spacing: a surface's far side lies nearer than
-that), the hand body hitting the object (certain hits by the balls inside the body's shapes, coal's
+In order: the palm inside the object (a body shape's centre inside the surface: its winding number,
+asked only where the centre is behind the tangent plane of its nearest object point), the hand body hitting the object (certain hits by the balls inside the body's shapes, coal's
 exact test for the rest), the thumb's workspace holding no contact candidate (no thumb contact can
 be found), and fewer than `MIN_CONTACTS` fingers' workspaces holding one (no grasp can be found).
 The candidates found on the way are what the finger search starts from.
@@ -21,17 +20,35 @@ if TYPE_CHECKING:
 
 MIN_CONTACTS = 3
 REJECTIONS = ("palm_inside", "body_collides", "thumb_misses", "unreachable")
+WINDING_BLOCK = 64  # points whose winding numbers are summed over all triangles in one numpy call
+
+
+def winding_numbers(triangles: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(k,) the winding number of a closed triangle surface (f, 3, 3) about points x (k, 3): 1 inside, 0 outside
+    (the triangles' solid angles, Van Oosterom and Strackee, over 4 pi)."""
+    out = np.empty(len(x))
+    for start in range(0, len(x), WINDING_BLOCK):
+        v = triangles[None] - x[start:start + WINDING_BLOCK, None, None, :]  # (b, f, 3, 3): vertices from the point
+        a, b, c = v[:, :, 0], v[:, :, 1], v[:, :, 2]
+        la, lb, lc = (np.linalg.norm(u, axis=2) for u in (a, b, c))
+        det = np.einsum("bfi,bfi->bf", a, np.cross(b, c))
+        div = (la * lb * lc + np.einsum("bfi,bfi->bf", a, b) * lc + np.einsum("bfi,bfi->bf", b, c) * la
+               + np.einsum("bfi,bfi->bf", c, a) * lb)
+        out[start:start + WINDING_BLOCK] = np.arctan2(det, div).sum(axis=1) / (2 * np.pi)
+    return out
 
 
 def palm_inside(search: GraspSearch, H: np.ndarray) -> np.ndarray:
-    """(n,) True where a body shape's centre lies inside the object, deeper than the point spacing."""
+    """(n,) True where a body shape's centre lies inside the object: those behind the tangent plane of their nearest
+    object point, and farther from it than the points' spacing, are confirmed by the winding number."""
     inside = np.zeros(len(H), bool)
     for shape in search.hand.body:
         world = H @ shape.placement
         centres = world[:, :3, :3] @ bounding(shape.geometry, np.eye(4))[0] + world[:, :3, 3]
         d, i = search.obj.tree.query(centres)
         behind = np.einsum("ij,ij->i", centres - search.obj.points[i], search.obj.normals[i]) < 0
-        inside |= behind & (d > search.obj.step)
+        suspect = np.flatnonzero(behind & (d > search.obj.step))
+        inside[suspect[winding_numbers(search.triangles, centres[suspect]) > 0.5]] = True
     return inside
 
 

@@ -80,6 +80,7 @@ class GraspSearch:
                  mesh: trimesh.Trimesh, p: SearchParams, limit_margin: float):
         self.hand, self.workspaces, self.obj, self.p = hand, workspaces, obj, p
         self.test = ObjectTest(mesh)
+        self.triangles = np.asarray(mesh.triangles, float)
         self.screen = ObjectScreen(obj.tree)
         self.seeds = [w.seeds() for w in workspaces]
         self.limits = [f.reduced_limits(limit_margin) for f in hand.fingers]
