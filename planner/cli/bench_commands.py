@@ -64,7 +64,8 @@ def _cmd_bench_grasps(args: argparse.Namespace) -> int:
     for hand in hands:
         hand_spec_of(scene.robot.spec, hand)
     result = bench_grasps(scene, find_task(args.task).resolve(), hands, session_grasp_seed(args.seed), args.workers,
-                          None if args.no_baseline else (args.baseline or BASELINE), lambda m: print(m, file=sys.stderr))
+                          None if args.no_baseline else (args.baseline or BASELINE), args.repeat,
+                          lambda m: print(m, file=sys.stderr))
     print(result.render())
     if args.json:
         write_json(Path(args.json), result.to_dict())
@@ -101,4 +102,5 @@ def add_bench(line: CommandLine) -> None:
     bg.add("--workers", type=positive_int, default=2, help="processes per list, in both builders")
     bg.add("--baseline", metavar="COMMIT", help="the earlier builder's commit (default: the last with the frame-by-frame search)")
     bg.add("--no-baseline", action="store_true", help="time this code's builder only")
+    bg.add("--repeat", type=positive_int, default=1, metavar="K", help="run each builder K times in turn and keep its fastest run")
     add_json(bg, "the figures")

@@ -17,7 +17,6 @@ from scipy.spatial import cKDTree
 from planner.grasping.finger_workspace import FingerWorkspace
 
 
-
 @dataclass(frozen=True, eq=False)
 class Candidates:
     """(frame, point) pairs, frames non-decreasing, each with its sphere and the target's distance to that sphere's centre."""

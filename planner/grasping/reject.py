@@ -1,10 +1,11 @@
 """Grasp frames dropped before any finger search, in one pass over all frames, each by the first test it fails.
 
-In order: the palm inside the object (a body shape's centre inside the surface: its winding number,
-asked only where the centre is behind the tangent plane of its nearest object point), the hand body hitting the object (certain hits by the balls inside the body's shapes, coal's
-exact test for the rest), the thumb's workspace holding no contact candidate (no thumb contact can
-be found), and fewer than `MIN_CONTACTS` fingers' workspaces holding one (no grasp can be found).
-The candidates found on the way are what the finger search starts from.
+In order: the palm inside the object (a body shape's centre inside the surface by the winding number,
+asked only where the centre is behind the tangent plane of its nearest object point), the hand body
+hitting the object (certain hits by the balls inside the body's shapes, coal's exact test for the
+rest), the thumb's workspace holding no contact candidate (no thumb contact can be found), and fewer
+than `MIN_CONTACTS` fingers' workspaces holding one (no grasp can be found). The candidates found on
+the way are what the finger search starts from.
 """
 from __future__ import annotations
 

@@ -28,8 +28,7 @@ from planner.collision.shapes import sphere, transform3s
 from planner.grasping.candidates import CandidateFinder, Candidates
 from planner.grasping.finger_workspace import FingerWorkspace
 from planner.grasping.object_model import ObjectModel
-from planner.grasping.quality import (com_score, contact_wrenches, curvature_score, ellipsoid_alignment, separated,
-                                      wrench_closure)
+from planner.grasping.quality import com_score, contact_wrenches, curvature_score, ellipsoid_alignment, separated, wrench_closure
 from planner.grasping.reject import MIN_CONTACTS, REJECTIONS, rejected
 from planner.grasping.screens import SPHERE_MARGIN, ObjectScreen, Posed, bounding, inscribed_balls
 from planner.model.hand_model import FingerChain, HandModel
@@ -108,8 +107,9 @@ class GraspSearch:
         placed shapes, else None. Coal tests the object first, links nearest the fingertip first (the likeliest to
         touch it), then the placed shapes whose bounding spheres reach the finger's."""
         shapes, test = self.hand.fingers[fi].shapes, self.test
-        transforms = [transform3s(pose) for pose in world]
+        transforms: list = [None] * len(shapes)
         for j in self.test_order[fi]:
+            transforms[j] = transform3s(world[j])
             if coal.collide(self._probe(fi, shapes[j], touching), transforms[j], test.object_geometry, test.identity, test.request,
                             coal.CollisionResult()):
                 return None
