@@ -163,7 +163,7 @@ def test_screened_hits_are_hits_by_fcl(search_and_frames, default_scene):
     rng = np.random.default_rng(1)
     frames = H[rng.integers(0, len(H), 400)]
     world = frames[:, None] @ finger.shape_poses(rng.uniform(finger.lower, finger.upper, (400, finger.dof)))
-    sure = search.screen.hits(world, search.balls[finger_index][False])
+    sure = search.screen.hits(world, search.inside[finger_index][False])
     assert sure.sum() > 10
     obj = _fcl_mesh(default_scene.object_mesh)
     for k in np.flatnonzero(sure):

@@ -19,22 +19,23 @@ SEPARATION_ITERATIONS = 256
 
 
 def tangent_bases(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents (c, 3) orthogonal to each unit normal and to each other."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    """Two unit tangents (..., 3) orthogonal to each unit normal (..., 3) and to each other."""
+    helper = np.where(np.abs(normals[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     t1 = np.cross(normals, helper)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
     return t1, np.cross(normals, t1)
 
 
 def contact_wrenches(points: np.ndarray, normals: np.ndarray, com: np.ndarray, mu: float, edges: int,
                      torque_scale: float) -> np.ndarray:
-    """(c * edges, 6) wrenches of the friction-cone edges at contacts with outward normals."""
-    normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    """(..., c * edges, 6) wrenches of the friction-cone edges at contacts (..., c, 3) with outward normals (leading
+    axes: many grasps of c contacts at once, each the same as alone)."""
+    normals = normals / np.linalg.norm(normals, axis=-1, keepdims=True)
     t1, t2 = tangent_bases(normals)
     a = 2.0 * np.pi * np.arange(edges) / edges
-    forces = -normals[:, None, :] + mu * (np.cos(a)[None, :, None] * t1[:, None, :] + np.sin(a)[None, :, None] * t2[:, None, :])
-    torques = np.cross((points - com)[:, None, :], forces) / torque_scale
-    return np.concatenate([forces, torques], axis=2).reshape(-1, 6)
+    forces = -normals[..., None, :] + mu * (np.cos(a)[:, None] * t1[..., None, :] + np.sin(a)[:, None] * t2[..., None, :])
+    torques = np.cross((points - com)[..., None, :], forces) / torque_scale
+    return np.concatenate([forces, torques], axis=-1).reshape(*points.shape[:-2], -1, 6)
 
 
 def hull_epsilon(wrenches: np.ndarray) -> float:

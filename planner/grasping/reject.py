@@ -2,7 +2,7 @@
 
 In order: the palm inside the object (a body shape's centre inside the surface by the winding number,
 asked only where the centre is behind the tangent plane of its nearest object point), the hand body
-hitting the object (certain hits by the balls inside the body's shapes, coal's exact test for the
+hitting the object (certain hits by object points inside the body's shapes, coal's exact test for the
 rest), the thumb's workspace holding no contact candidate (no thumb contact can be found), and fewer
 than `MIN_CONTACTS` fingers' workspaces holding one (no grasp can be found). The candidates found on
 the way are what the finger search starts from.
@@ -54,11 +54,11 @@ def palm_inside(search: GraspSearch, H: np.ndarray) -> np.ndarray:
 
 
 def body_hits(search: GraspSearch, H: np.ndarray) -> np.ndarray:
-    """(n,) True where a body shape hits the object (screened by its inside balls, then coal)."""
+    """(n,) True where a body shape hits the object (object points inside it, then coal)."""
     hit = np.zeros(len(H), bool)
     for j, shape in enumerate(search.hand.body):
         world = (H @ shape.placement)[:, None]
-        hit |= search.screen.hits(world, [search.body_balls[j]])
+        hit |= search.screen.hits(world, [search.body_inside[j]])
         for k in np.flatnonzero(~hit):
             hit[k] = search.test.hits_object(shape.geometry, world[k, 0])
     return hit

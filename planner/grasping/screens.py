@@ -1,11 +1,16 @@
 """Tests that settle a collision before coal's exact one in the grasp search, for many posed shapes per numpy call.
 
-A shape certainly hits the object when a ball inside it holds a point of the object's point set: the
-points lie on the surface, so a triangle crosses the shape (coal, testing the mesh's triangles, says
-the same). Two shapes certainly miss each other when their bounding spheres are apart. A screen only
-ever answers where the exact test's answer is known; a shape it does not settle goes to coal.
+A shape certainly hits the object when a point of the object's point set lies inside it: the points
+lie on the surface, so a triangle crosses the shape (coal, testing the mesh's triangles, says the
+same). Boxes and spheres are tested so (the kd-tree gives the points near each posed shape); other
+shapes are left to coal. Two shapes certainly miss each other when their bounding spheres are apart.
+A screen only ever answers where the exact test's answer is known; a shape it does not settle goes
+to coal.
 """
 from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
 
 import coal
 import numpy as np
@@ -13,23 +18,27 @@ from scipy.spatial import cKDTree
 
 from planner.collision.hand_placement import _bounding_sphere
 
-BALL_MARGIN = 1e-5  # m: a ball is shrunk by this before a point in it proves a hit (far beyond coal's tolerance)
+INSIDE_MARGIN = 1e-5  # m: a shape is shrunk by this before a point in it proves a hit (far beyond coal's tolerance)
 SPHERE_MARGIN = 1e-6  # m: bounding spheres must be this far apart to prove a miss
 
 
-def inscribed_balls(geometry: coal.CollisionGeometry) -> tuple[np.ndarray, float]:
-    """Centres (b, 3) in the shape's frame and the radius of balls inside the shape: a box's smallest half-side along its
-    longest axis, a sphere itself; none (b = 0) for other shapes."""
-    if isinstance(geometry, coal.Sphere):
-        return np.zeros((1, 3)), float(geometry.radius)
-    if isinstance(geometry, coal.Box):
-        half = np.asarray(geometry.halfSide, float)
-        r, axis = float(half.min()), int(np.argmax(half))
-        along = np.linspace(r - half[axis], half[axis] - r, int(np.ceil(half[axis] / r)))
-        centres = np.zeros((len(along), 3))
-        centres[:, axis] = along
-        return centres, r
-    return np.zeros((0, 3)), 0.0
+@dataclass(frozen=True, eq=False)
+class Inside:
+    """The part of a shape (in its own frame, centred on it) whose object points prove a hit: a box's half-sides or a
+    sphere's radius, shrunk by `INSIDE_MARGIN`."""
+
+    half: np.ndarray | None  # (3,) for a box
+    radius: float  # the sphere's, or the box's half diagonal (how far its points can lie from its centre)
+
+
+def inside_of(geometry: coal.CollisionGeometry) -> Inside | None:
+    """What the screen tests of a shape: boxes and spheres; None for other shapes (or ones thinner than the margin)."""
+    if isinstance(geometry, coal.Sphere) and geometry.radius > INSIDE_MARGIN:
+        return Inside(None, float(geometry.radius) - INSIDE_MARGIN)
+    if isinstance(geometry, coal.Box) and min(geometry.halfSide) > INSIDE_MARGIN:
+        half = np.asarray(geometry.halfSide, float) - INSIDE_MARGIN
+        return Inside(half, float(np.linalg.norm(half)))
+    return None
 
 
 class ObjectScreen:
@@ -38,16 +47,23 @@ class ObjectScreen:
     def __init__(self, tree: cKDTree):
         self.tree = tree
 
-    def hits(self, world: np.ndarray, balls: list[tuple[np.ndarray, float]]) -> np.ndarray:
-        """(m,) True where one of a posed set of shapes (`world` (m, s, 4, 4), their `balls` from `inscribed_balls`)
-        certainly hits the object."""
+    def hits(self, world: np.ndarray, insides: list[Inside | None]) -> np.ndarray:
+        """(m,) True where one of a posed set of shapes (`world` (m, s, 4, 4), each shape's `inside_of`) certainly hits the
+        object."""
         hit = np.zeros(len(world), bool)
-        for j, (centres, radius) in enumerate(balls):
-            if len(centres) == 0 or radius <= BALL_MARGIN or len(world) == 0:
+        for j, inside in enumerate(insides):
+            if inside is None or len(world) == 0:
                 continue
-            posed = centres @ world[:, j, :3, :3].transpose(0, 2, 1) + world[:, j, None, :3, 3]
-            d, _ = self.tree.query(posed.reshape(-1, 3), distance_upper_bound=radius - BALL_MARGIN)
-            hit |= np.isfinite(d).reshape(len(world), -1).any(axis=1)
+            centres = world[:, j, :3, 3]
+            if inside.half is None:
+                hit |= np.isfinite(self.tree.query(centres, distance_upper_bound=inside.radius)[0])
+                continue
+            found = self.tree.query_ball_point(centres, inside.radius, return_sorted=False)
+            lengths = np.fromiter(map(len, found), int, len(found))
+            rows = np.repeat(np.arange(len(found)), lengths)
+            points = np.fromiter(itertools.chain.from_iterable(found), int, int(lengths.sum()))
+            local = np.einsum("ki,kij->kj", self.tree.data[points] - centres[rows], world[rows, j, :3, :3])
+            hit[rows[np.all(np.abs(local) < inside.half, axis=1)]] = True
         return hit
 
 

@@ -30,7 +30,7 @@ from planner.grasping.finger_workspace import FingerWorkspace
 from planner.grasping.object_model import ObjectModel
 from planner.grasping.quality import com_score, contact_wrenches, curvature_score, ellipsoid_alignment, separated, wrench_closure
 from planner.grasping.reject import MIN_CONTACTS, REJECTIONS, rejected
-from planner.grasping.screens import SPHERE_MARGIN, ObjectScreen, Posed, bounding, inscribed_balls
+from planner.grasping.screens import SPHERE_MARGIN, ObjectScreen, Posed, bounding, inside_of
 from planner.model.hand_model import FingerChain, HandModel
 
 # Why a frame yields no grasp (or the grasp it yields), in the order the search meets them.
@@ -88,10 +88,11 @@ class GraspSearch:
         self.targets = [obj.points + f.tip_radius * obj.normals for f in hand.fingers]
         self.closing = [closing_direction(f) for f in hand.fingers]
         self.finders = [CandidateFinder(w, t, obj.tree) for w, t in zip(workspaces, self.targets)]
-        self.body_balls = [inscribed_balls(s.geometry) for s in hand.body]
-        # per finger and shape, the balls inside what is tested against the object: touching (the shrunk tip) or open
-        self.balls = [{touching: [inscribed_balls(self._probe(fi, s, touching)) for s in f.shapes] for touching in (True, False)}
-                      for fi, f in enumerate(hand.fingers)]
+        self.body_inside = [inside_of(s.geometry) for s in hand.body]
+        # per finger and shape, what the screen tests of what is tested against the object, touching (the shrunk tip) or
+        # open: the shapes on the last link, where a finger whose tip touches the object most often hits it too
+        self.inside = [{touching: [inside_of(self._probe(fi, s, touching)) if s.link == f.dof - 1 else None for s in f.shapes]
+                        for touching in (True, False)} for fi, f in enumerate(hand.fingers)]
         self.open_poses = [f.shape_poses(f.open_q[None])[0] for f in hand.fingers]
         # per finger, its shapes' bounding spheres in their own frames: centres (s, 3) and radii (s,)
         spheres = [[bounding(s.geometry, np.eye(4)) for s in f.shapes] for f in hand.fingers]
@@ -161,7 +162,7 @@ class GraspSearch:
             if len(ok) == 0:
                 continue
             world = H[frame[ok], None] @ finger.shape_poses(q[ok])
-            sure = self.screen.hits(world, self.balls[fi][True])
+            sure = self.screen.hits(world, self.inside[fi][True])
             for j in np.flatnonzero(~sure):
                 k = ok[j]
                 if done[frame[k]]:
@@ -175,7 +176,7 @@ class GraspSearch:
     def _open_fits(self, fi: int, H: np.ndarray, frames: np.ndarray, placed: list[list[Posed]]) -> list[list[Posed] | None]:
         """Per frame, the finger's posed shapes when it stays open and is collision-free there, else None."""
         world = H[frames, None] @ self.open_poses[fi]
-        sure = self.screen.hits(world, self.balls[fi][False])
+        sure = self.screen.hits(world, self.inside[fi][False])
         return [None if s else self._fits(fi, w, placed[k], touching=False) for k, w, s in zip(frames, world, sure)]
 
     def grasps(self, H: np.ndarray) -> list[FrameGrasp]:
@@ -215,8 +216,14 @@ class GraspSearch:
         """Stability filter and scores of the grasps with enough contacts, by frame."""
         p, obj = self.p, self.obj
         used = [np.flatnonzero(contact[k] >= 0) for k in frames]
-        wrenches = [contact_wrenches(obj.points[contact[k, u]], obj.normals[contact[k, u]], obj.com, p.mu, p.cone_edges,
-                                     self.torque_scale) for k, u in zip(frames, used)]
+        wrenches: list = [None] * len(frames)
+        counts = np.array([len(u) for u in used], int)
+        for c in np.unique(counts):  # the grasps of c contacts together
+            rows = np.flatnonzero(counts == c)
+            index = np.array([contact[frames[r], used[r]] for r in rows])
+            for r, w in zip(rows, contact_wrenches(obj.points[index], obj.normals[index], obj.com, p.mu, p.cone_edges,
+                                                   self.torque_scale)):
+                wrenches[r] = w
         out = {}
         for k, u, w, apart_ in zip(frames, used, wrenches, separated(wrenches)):
             closed, eps = (False, 0.0) if apart_ else wrench_closure(w)

@@ -73,8 +73,9 @@ class FingerChain:
         local = A + s * B + c * C
         R = np.empty((len(q), self.dof, 3, 3))
         p = np.empty((len(q), self.dof, 3))
-        R_prev, p_prev = np.eye(3), np.zeros(3)
-        for j in range(self.dof):
+        R_prev, p_prev = local[:, 0], t[0]  # the hand frame is the identity: its products are exact copies
+        R[:, 0], p[:, 0] = R_prev, p_prev
+        for j in range(1, self.dof):
             p_prev = p_prev + R_prev @ t[j]
             R_prev = R_prev @ local[:, j]
             R[:, j], p[:, j] = R_prev, p_prev
