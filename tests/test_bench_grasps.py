@@ -36,6 +36,7 @@ def test_the_json_has_frames_stages_grasps_seconds_and_rate_per_hand(tmp_path, m
     assert hand["hand"] == "right" and hand["baseline"] is None and hand["ratio"] is None
     assert hand["frames"] > hand["stages"]["palm_inside"] >= hand["stages"]["not_closed"] >= hand["grasps"] > 0
     assert hand["grasps_per_second"] == pytest.approx(hand["grasps"] / hand["seconds"])
+    assert 0 < hand["cpu_seconds"] and hand["cpu_ratio"] is None
 
 
 def test_an_unknown_baseline_commit_is_one_line(monkeypatch, capsys):
@@ -52,4 +53,4 @@ def test_the_earlier_builder_finds_the_same_number_of_grasps(tmp_path, monkeypat
     assert main(["bench", "grasps", "--workers", "1", "--json", str(out)]) == 0
     for hand in json.loads(out.read_text())["hands"]:
         assert hand["baseline"]["grasps"] == hand["grasps"] > 0 and hand["baseline"]["frames"] == hand["frames"]
-        assert hand["ratio"] > 0
+        assert hand["ratio"] > 0 and hand["cpu_ratio"] > 0 and hand["baseline"]["cpu_seconds"] > 0
