@@ -2,14 +2,13 @@
 
 A shape certainly hits the object when a point of the object's point set lies inside it: the points
 lie on the surface, so a triangle crosses the shape (coal, testing the mesh's triangles, says the
-same). Boxes and spheres are tested so (the kd-tree gives the points near each posed shape); other
-shapes are left to coal. Two shapes certainly miss each other when their bounding spheres are apart.
+same). Boxes and spheres are tested so (the kd-tree gives the points nearest each posed shape's
+centre); other shapes are left to coal. Two shapes certainly miss each other when their bounding spheres are apart.
 A screen only ever answers where the exact test's answer is known; a shape it does not settle goes
 to coal.
 """
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import coal
@@ -20,6 +19,7 @@ from planner.collision.hand_placement import _bounding_sphere
 
 INSIDE_MARGIN = 1e-5  # m: a shape is shrunk by this before a point in it proves a hit (far beyond coal's tolerance)
 SPHERE_MARGIN = 1e-6  # m: bounding spheres must be this far apart to prove a miss
+BOX_NEIGHBOURS = 4  # the object points nearest a box's centre that are tested for lying inside it
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,11 +58,9 @@ class ObjectScreen:
             if inside.half is None:
                 hit |= np.isfinite(self.tree.query(centres, distance_upper_bound=inside.radius)[0])
                 continue
-            found = self.tree.query_ball_point(centres, inside.radius, return_sorted=False)
-            lengths = np.fromiter(map(len, found), int, len(found))
-            rows = np.repeat(np.arange(len(found)), lengths)
-            points = np.fromiter(itertools.chain.from_iterable(found), int, int(lengths.sum()))
-            local = np.einsum("ki,kij->kj", self.tree.data[points] - centres[rows], world[rows, j, :3, :3])
+            d, points = self.tree.query(centres, k=BOX_NEIGHBOURS, distance_upper_bound=inside.radius)
+            rows, nearest = np.nonzero(np.isfinite(d))
+            local = np.einsum("ki,kij->kj", self.tree.data[points[rows, nearest]] - centres[rows], world[rows, j, :3, :3])
             hit[rows[np.all(np.abs(local) < inside.half, axis=1)]] = True
         return hit
 
