@@ -1,5 +1,5 @@
-"""`regrasp bench collision`, `bench double-grasps` and `bench motion`: the benchmarks of planner/cli/bench.py with their
-options, printed as tables (and written as JSON with --json)."""
+"""`regrasp bench collision`, `bench double-grasps`, `bench motion` and `bench grasps`: the benchmarks of planner/cli/bench.py
+and planner/cli/bench_grasps.py with their options, printed as tables (and written as JSON with --json)."""
 from __future__ import annotations
 
 import argparse
@@ -54,8 +54,26 @@ def _cmd_bench_motion(args: argparse.Namespace) -> int:
     return _bench_in_scratch(args, lambda scene, tmp, say: bench_motion(scene, args.seeds, tmp, say, args.repeat))
 
 
+def _cmd_bench_grasps(args: argparse.Namespace) -> int:
+    from planner.cli.bench_grasps import BASELINE, bench_grasps
+    from planner.grasping.grasp_list import hand_spec_of, session_grasp_seed
+    from planner.model.task import find_task, load_task
+
+    scene = load_task(args.task)
+    hands = [args.hand] if args.hand else list(scene.robot.spec.arm_names)
+    for hand in hands:
+        hand_spec_of(scene.robot.spec, hand)
+    result = bench_grasps(scene, find_task(args.task).resolve(), hands, session_grasp_seed(args.seed), args.workers,
+                          None if args.no_baseline else (args.baseline or BASELINE), args.repeat,
+                          lambda m: print(m, file=sys.stderr))
+    print(result.render())
+    if args.json:
+        write_json(Path(args.json), result.to_dict())
+    return 0
+
+
 def add_bench(line: CommandLine) -> None:
-    """`regrasp bench` and its three benchmarks."""
+    """`regrasp bench` and its four benchmarks."""
     line.group("bench", "benchmarks, printed as tables", dest="what", metavar="WHAT")
     bc = line.command("collision", "collision checking and forward kinematics timings", _cmd_bench, within="bench")
     add_task(bc)
@@ -76,3 +94,13 @@ def add_bench(line: CommandLine) -> None:
            help="plan each seed K times and keep its fastest run (the motion is the same each time; on a busy "
                 "machine the fastest is the steadiest figure)")
     add_json(bm, "the figures")
+    bg = line.command("grasps", "each hand's grasp list: frames left per stage, grasps, seconds, grasps per second, and the "
+                      "ratio to an earlier commit's builder run side by side", _cmd_bench_grasps, within="bench")
+    add_task(bg)
+    bg.add("--hand", help="only this arm's hand (default: every hand)")
+    bg.add("--seed", type=seed_argument, default=0, help="session seed: the lists `plan --seed` computes")
+    bg.add("--workers", type=positive_int, default=2, help="processes per list, in both builders")
+    bg.add("--baseline", metavar="COMMIT", help="the earlier builder's commit (default: the last with the frame-by-frame search)")
+    bg.add("--no-baseline", action="store_true", help="time this code's builder only")
+    bg.add("--repeat", type=positive_int, default=1, metavar="K", help="run each builder K times in turn and keep its fastest run")
+    add_json(bg, "the figures")

@@ -1,34 +1,40 @@
-"""The grasp at one grasp frame (paper IV-A.2): finger by finger, thumb first, contacts from sphere hierarchy x kd-tree.
+"""The grasps at many grasp frames at once (paper IV-A.2): finger by finger, thumb first, all frames of a batch together.
 
-For each finger, its workspace spheres (largest first) are moved into the object frame and
-intersected with the object's point set; a candidate contact p with outward normal n asks the
-fingertip sphere (radius r) to sit at p + r n. Within one sphere (the paper leaves the order
-open) the thumb takes the point nearest the sphere's centre first, the other fingers the surface
-most opposed to the contacts already made (force closure needs opposition). The candidates' IK
-is solved in batches, seeded from the nearest workspace sample; a solution counts when closing
-the finger pushes its tip into the surface (within `press_angle` of the inward normal: a finger
-can only squeeze by closing), and the first candidate whose finger is collision-free with
-the object (the fingertip sphere shrunk by a clearance, since it touches) and with the fingers
-already placed is accepted. A finger without contact stays open and must be collision-free too;
-the hand body must not touch the object. Contacts >= 3 go to the stability filter.
+Frames the hand cannot grasp from are dropped first (reject.py). Then, for each finger, every kept
+frame's contact candidates (candidates.py: object points p with outward normal n whose fingertip
+target p + r n lies in the finger's workspace spheres) are ranked: largest sphere first; within a
+sphere (the paper leaves the order open) the thumb takes the point nearest the sphere's centre, the
+other fingers the surface most opposed to the contacts already made (force closure needs opposition).
+The candidates' IK is solved for all frames in one call, in rounds of `ik_batch` candidates per
+frame (each frame's batch stops on its own, as if solved alone), seeded from the nearest workspace
+sample; a solution counts when closing the finger pushes its tip into the surface (within
+`press_angle` of the inward normal: a finger can only squeeze by closing). A frame takes its first
+candidate, in rank order, whose finger is collision-free with the object (the fingertip sphere
+shrunk by a clearance, since it touches) and with the fingers already placed: certain hits are
+screened out for all candidates at once (screens.py), coal's exact test decides the rest. A finger
+without contact stays open and must be collision-free too. Grasps of >= 3 contacts go to the
+stability filter, where a separating hyperplane rules most out before the exact hull.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import coal
 import numpy as np
 import trimesh
 
 from planner.collision.hand_placement import ObjectTest
-from planner.collision.shapes import sphere
+from planner.collision.shapes import sphere, transform3s
+from planner.grasping.candidates import CandidateFinder, Candidates
 from planner.grasping.finger_workspace import FingerWorkspace
 from planner.grasping.object_model import ObjectModel
-from planner.grasping.quality import com_score, curvature_score, ellipsoid_alignment, force_closure
+from planner.grasping.quality import com_score, contact_wrenches, curvature_score, ellipsoid_alignment, separated, wrench_closure
+from planner.grasping.reject import MIN_CONTACTS, REJECTIONS, rejected
+from planner.grasping.screens import SPHERE_MARGIN, ObjectScreen, Posed, bounding, inside_of
 from planner.model.hand_model import FingerChain, HandModel
 
-MIN_CONTACTS = 3
 # Why a frame yields no grasp (or the grasp it yields), in the order the search meets them.
-OUTCOMES = ("body_collides", "no_thumb_contact", "open_finger_collides", "few_contacts", "not_closed", "closed")
+OUTCOMES = REJECTIONS + ("no_thumb_contact", "open_finger_collides", "few_contacts", "not_closed", "closed")
 
 
 @dataclass(frozen=True)
@@ -67,121 +73,169 @@ def closing_direction(finger: FingerChain) -> np.ndarray:
 
 
 class GraspSearch:
-    """Computes the grasp at grasp frames for one hand and one object (read-only after construction)."""
+    """Computes the grasps at grasp frames for one hand and one object (read-only after construction)."""
 
     def __init__(self, hand: HandModel, workspaces: tuple[FingerWorkspace, ...], obj: ObjectModel,
                  mesh: trimesh.Trimesh, p: SearchParams, limit_margin: float):
         self.hand, self.workspaces, self.obj, self.p = hand, workspaces, obj, p
         self.test = ObjectTest(mesh)
+        self.triangles = np.asarray(mesh.triangles, float)
+        self.screen = ObjectScreen(obj.tree)
         self.seeds = [w.seeds() for w in workspaces]
         self.limits = [f.reduced_limits(limit_margin) for f in hand.fingers]
         self.torque_scale = obj.radius
         self.tip_spheres = [sphere(f.tip_radius - p.contact_clearance) for f in hand.fingers]
         self.targets = [obj.points + f.tip_radius * obj.normals for f in hand.fingers]
         self.closing = [closing_direction(f) for f in hand.fingers]
+        self.finders = [CandidateFinder(w, t, obj.tree) for w, t in zip(workspaces, self.targets)]
+        self.body_inside = [inside_of(s.geometry) for s in hand.body]
+        # per finger and shape, what the screen tests of what is tested against the object, touching (the shrunk tip) or
+        # open: the shapes on the last link, where a finger whose tip touches the object most often hits it too
+        self.inside = [{touching: [inside_of(self._probe(fi, s, touching)) if s.link == f.dof - 1 else None for s in f.shapes]
+                        for touching in (True, False)} for fi, f in enumerate(hand.fingers)]
+        self.open_poses = [f.shape_poses(f.open_q[None])[0] for f in hand.fingers]
+        # per finger, its shapes' bounding spheres in their own frames: centres (s, 3) and radii (s,)
+        spheres = [[bounding(s.geometry, np.eye(4)) for s in f.shapes] for f in hand.fingers]
+        self.test_order = [sorted(range(len(f.shapes)), key=lambda j, f=f: (f.shapes[j].is_tip, -f.shapes[j].link)) for f in hand.fingers]
+        self.bounds = [(np.array([c for c, _ in b]).reshape(-1, 3), np.array([r for _, r in b])) for b in spheres]
 
-    def _finger_fits(self, fi: int, shape_poses: np.ndarray, H: np.ndarray, placed: list, touching: bool) -> list | None:
-        """The finger's shapes posed in the object frame when collision-free with the object and placed fingers, else None."""
-        finger = self.hand.fingers[fi]
-        posed = []
-        for shape, pose in zip(finger.shapes, shape_poses):
-            world = H @ pose
-            probe = self.tip_spheres[fi] if (touching and shape.is_tip) else shape.geometry
-            if self.test.hits_object(probe, world):
-                return None
-            placed_shape = self.test.posed(shape.geometry, world)
-            if self.test.hits_placed(placed_shape, placed):
-                return None
-            posed.append(placed_shape)
-        return posed
+    def _probe(self, fi: int, shape, touching: bool) -> coal.CollisionGeometry:
+        """What a finger shape is tested against the object as: a touching fingertip shrunk by the clearance."""
+        return self.tip_spheres[fi] if (touching and shape.is_tip) else shape.geometry
 
-    def candidates(self, fi: int, H: np.ndarray, placed_normals: np.ndarray) -> np.ndarray:
-        """Object points whose fingertip target lies in the finger's spheres, largest sphere first; within a sphere,
-        the surface most opposed to the contacts already made first (the thumb's: nearest the centre first)."""
-        ws, finger = self.workspaces[fi], self.hand.fingers[fi]
-        centres = ws.centres @ H[:3, :3].T + H[:3, 3]
-        idx = np.asarray(self.obj.tree.query_ball_point(H[:3, :3] @ ws.centre + H[:3, 3], ws.reach + finger.tip_radius), int)
-        if len(idx) == 0:
-            return idx
-        targets = self.targets[fi][idx]
-        inside = np.linalg.norm(targets[:, None, :] - centres[None], axis=2) <= ws.radii
-        sphere = np.argmax(inside, axis=1)  # the largest sphere holding the target
-        hit = inside[np.arange(len(idx)), sphere]
-        idx, sphere = idx[hit], sphere[hit]
-        if placed_normals.any():
-            key = self.obj.normals[idx] @ placed_normals
-        else:
-            key = np.linalg.norm(targets[hit] - centres[sphere], axis=1)
-        return idx[np.lexsort((key, sphere))][: self.p.max_candidates]
+    def _fits(self, fi: int, world: np.ndarray, placed: list[Posed], touching: bool) -> list[Posed] | None:
+        """The finger's shapes (posed in the object frame, `world` (s, 4, 4)) when collision-free with the object and the
+        placed shapes, else None. Coal tests the object first, links nearest the fingertip first (the likeliest to
+        touch it), then the placed shapes whose bounding spheres reach the finger's."""
+        shapes, test = self.hand.fingers[fi].shapes, self.test
+        transforms: list = [None] * len(shapes)
+        for j in self.test_order[fi]:
+            transforms[j] = transform3s(world[j])
+            if coal.collide(self._probe(fi, shapes[j], touching), transforms[j], test.object_geometry, test.identity, test.request,
+                            coal.CollisionResult()):
+                return None
+        centres = np.einsum("sij,sj->si", world[:, :3, :3], self.bounds[fi][0]) + world[:, :3, 3]
+        radii = self.bounds[fi][1]
+        if placed:
+            others, other_radii = np.array([o[2] for o in placed]), np.array([o[3] for o in placed])
+            near = np.linalg.norm(centres[:, None] - others[None], axis=2) <= radii[:, None] + other_radii + SPHERE_MARGIN
+            for j, o in zip(*np.nonzero(near)):
+                if coal.collide(shapes[j].geometry, transforms[j], placed[o][0], placed[o][1], test.request, coal.CollisionResult()):
+                    return None
+        return [(shape.geometry, tf, centre, float(r)) for shape, tf, centre, r in zip(shapes, transforms, centres, radii)]
 
     def _presses(self, fi: int, q: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Which contacts the finger can press: closing it (joints moving from the open configuration towards
         mid-range) moves the fingertip into the surface, within `press_angle` of the inward normal."""
-        finger = self.hand.fingers[fi]
-        _, J = finger.jacobians(q)
+        _, J = self.hand.fingers[fi].jacobians(q)
         motion = J @ self.closing[fi]
         norm = np.linalg.norm(motion, axis=1)
         return -np.einsum("ij,ij->i", motion, normals) > np.cos(self.p.press_angle) * np.maximum(norm, 1e-12)
 
-    def _place_finger(self, fi: int, H: np.ndarray, placed: list, placed_normals: np.ndarray) -> tuple[np.ndarray, int, list] | None:
-        """The first collision-free contact of a finger: (q, point index, posed shapes), or None."""
-        finger = self.hand.fingers[fi]
-        cand = self.candidates(fi, H, placed_normals)
+    def _ranked(self, c: Candidates, contact: np.ndarray) -> tuple[Candidates, np.ndarray]:
+        """A finger's candidates in the order it tries them, at most `max_candidates` per frame, and their ranks."""
+        placed = np.where(contact[:, :, None] >= 0, self.obj.normals[np.maximum(contact, 0)], 0.0).sum(axis=1)
+        opposed = placed.any(axis=1)[c.frame]
+        key = np.where(opposed, np.einsum("ij,ij->i", self.obj.normals[c.point], placed[c.frame]), c.centre_distance)
+        return c.ranked(key, self.p.max_candidates)
+
+    def _place_finger(self, fi: int, H: np.ndarray, c: Candidates, contact: np.ndarray,
+                      placed: list[list[Posed]]) -> dict[int, tuple[np.ndarray, int, list[Posed]]]:
+        """Per frame of the candidates, the finger's first collision-free contact: frame -> (q, point index, posed shapes)."""
+        finger, p = self.hand.fingers[fi], self.p
+        c, rank = self._ranked(c, contact)
         lower, upper = self.limits[fi]
-        R, t = H[:3, :3], H[:3, 3]
-        for start in range(0, len(cand), self.p.ik_batch):
-            batch = cand[start:start + self.p.ik_batch]
-            targets = (self.targets[fi][batch] - t) @ R
+        found: dict[int, tuple[np.ndarray, int, list[Posed]]] = {}
+        done = np.zeros(len(H), bool)
+        for start in range(0, p.max_candidates, p.ik_batch):
+            rows = np.flatnonzero((rank >= start) & (rank < start + p.ik_batch) & ~done[c.frame])
+            if len(rows) == 0:
+                break
+            frame, point = c.frame[rows], c.point[rows]
+            R = H[frame, :3, :3]
+            targets = np.einsum("ki,kij->kj", self.targets[fi][point] - H[frame, :3, 3], R)
             _, seed = self.seeds[fi].query(targets)
-            q, err = finger.ik(targets, self.workspaces[fi].seed_q[seed], lower, upper, self.p.ik_tolerance, self.p.ik_iterations)
-            ok = np.flatnonzero(err < self.p.ik_tolerance)
-            ok = ok[self._presses(fi, q[ok], self.obj.normals[batch[ok]] @ R)]
+            q, err = finger.ik(targets, self.workspaces[fi].seed_q[seed], lower, upper, p.ik_tolerance, p.ik_iterations,
+                               groups=frame)
+            ok = np.flatnonzero(err < p.ik_tolerance)
+            ok = ok[self._presses(fi, q[ok], np.einsum("ki,kij->kj", self.obj.normals[point[ok]], R[ok]))]
             if len(ok) == 0:
                 continue
-            poses = finger.shape_poses(q[ok])
-            for j, k in enumerate(ok):
-                posed = self._finger_fits(fi, poses[j], H, placed, touching=True)
+            world = H[frame[ok], None] @ finger.shape_poses(q[ok])
+            sure = self.screen.hits(world, self.inside[fi][True])
+            for j in np.flatnonzero(~sure):
+                k = ok[j]
+                if done[frame[k]]:
+                    continue
+                posed = self._fits(fi, world[j], placed[frame[k]], touching=True)
                 if posed is not None:
-                    return q[k], int(batch[k]), posed
-        return None
+                    found[int(frame[k])] = (q[k], int(point[k]), posed)
+                    done[frame[k]] = True
+        return found
 
-    def at_frame(self, H: np.ndarray) -> FrameGrasp:
-        """The grasp at hand pose H (hand frame in the object frame), finger by finger, thumb first."""
-        for shape in self.hand.body:
-            if self.test.hits_object(shape.geometry, H @ shape.placement):
-                return FrameGrasp("body_collides")
-        n = len(self.hand.fingers)
-        qs = [f.open_q for f in self.hand.fingers]
-        contact = -np.ones(n, int)
-        placed: list = []
+    def _open_fits(self, fi: int, H: np.ndarray, frames: np.ndarray, placed: list[list[Posed]]) -> list[list[Posed] | None]:
+        """Per frame, the finger's posed shapes when it stays open and is collision-free there, else None."""
+        world = H[frames, None] @ self.open_poses[fi]
+        sure = self.screen.hits(world, self.inside[fi][False])
+        return [None if s else self._fits(fi, w, placed[k], touching=False) for k, w, s in zip(frames, world, sure)]
+
+    def grasps(self, H: np.ndarray) -> list[FrameGrasp]:
+        """The grasp (or why none) at each hand pose of H (n, 4, 4: the hand frame in the object frame)."""
+        outcome, candidates = rejected(self, H)
+        n, f = len(H), len(self.hand.fingers)
+        alive = np.flatnonzero(outcome == "")
+        q = np.tile(self.hand.open_q, (n, 1))
+        ends = np.cumsum([finger.dof for finger in self.hand.fingers])
+        contact = -np.ones((n, f), int)
+        placed: list[list[Posed]] = [[] for _ in range(n)]
         for rank, fi in enumerate(self.hand.thumb_first):
-            found = self._place_finger(fi, H, placed, self.obj.normals[contact[contact >= 0]].sum(0))
-            if found is None:
-                if rank == 0:
-                    return FrameGrasp("no_thumb_contact")
-                finger = self.hand.fingers[fi]
-                posed = self._finger_fits(fi, finger.shape_poses(finger.open_q[None])[0], H, placed, touching=False)
-                if posed is None:
-                    return FrameGrasp("open_finger_collides")
+            mine = candidates[fi]
+            member = np.zeros(n, bool)
+            member[alive] = True
+            found = self._place_finger(fi, H, mine.subset(member[mine.frame]), contact, placed)
+            for k, (qf, point, posed) in found.items():
+                q[k, ends[fi] - len(qf):ends[fi]], contact[k, fi] = qf, point
+                placed[k] += posed
+            missing = np.array([k for k in alive if k not in found], int)
+            if rank == 0:
+                outcome[missing] = "no_thumb_contact"
             else:
-                qs[fi], contact[fi], posed = found
-            placed += posed
-            if np.count_nonzero(contact >= 0) + (n - rank - 1) < MIN_CONTACTS:
-                return FrameGrasp("few_contacts")
-        return self._scored(H, np.concatenate(qs), contact)
+                for k, posed in zip(missing, self._open_fits(fi, H, missing, placed)):
+                    if posed is None:
+                        outcome[k] = "open_finger_collides"
+                    else:
+                        placed[k] += posed
+            alive = alive[outcome[alive] == ""]
+            few = np.count_nonzero(contact[alive] >= 0, axis=1) + (f - rank - 1) < MIN_CONTACTS
+            outcome[alive[few]] = "few_contacts"
+            alive = alive[~few]
+        scored = self._scored(H, q, contact, alive)
+        return [scored[k] if k in scored else FrameGrasp(outcome[k]) for k in range(n)]
 
-    def _scored(self, H: np.ndarray, q: np.ndarray, contact: np.ndarray) -> FrameGrasp:
-        """Stability filter and scores of a grasp with enough contacts."""
-        used = np.flatnonzero(contact >= 0)
-        points, normals = self.obj.points[contact[used]], self.obj.normals[contact[used]]
-        closed, eps = force_closure(points, normals, self.obj.com, self.p.mu, self.p.cone_edges, self.torque_scale)
-        if not closed:
-            return FrameGrasp("not_closed")
-        parts, alignment = self.hand.split(q), []
-        for fi in used:
-            _, J = self.hand.fingers[fi].jacobians(parts[fi][None])
-            alignment.append(ellipsoid_alignment(J[0], H[:3, :3].T @ self.obj.normals[contact[fi]]))
-        radius = min(self.hand.fingers[fi].tip_radius for fi in used)
-        d, s = com_score(points, self.obj.com, self.torque_scale)
-        return FrameGrasp("closed", H, q, contact, eps, d, s, float(np.mean(alignment)),
-                          curvature_score(self.obj.curvature[contact[used]], radius))
+    def _scored(self, H: np.ndarray, q: np.ndarray, contact: np.ndarray, frames: np.ndarray) -> dict[int, FrameGrasp]:
+        """Stability filter and scores of the grasps with enough contacts, by frame."""
+        p, obj = self.p, self.obj
+        used = [np.flatnonzero(contact[k] >= 0) for k in frames]
+        wrenches: list = [None] * len(frames)
+        counts = np.array([len(u) for u in used], int)
+        for c in np.unique(counts):  # the grasps of c contacts together
+            rows = np.flatnonzero(counts == c)
+            index = np.array([contact[frames[r], used[r]] for r in rows])
+            for r, w in zip(rows, contact_wrenches(obj.points[index], obj.normals[index], obj.com, p.mu, p.cone_edges,
+                                                   self.torque_scale)):
+                wrenches[r] = w
+        out = {}
+        for k, u, w, apart_ in zip(frames, used, wrenches, separated(wrenches)):
+            closed, eps = (False, 0.0) if apart_ else wrench_closure(w)
+            if not closed:
+                out[int(k)] = FrameGrasp("not_closed")
+                continue
+            points, parts, alignment = obj.points[contact[k, u]], self.hand.split(q[k]), []
+            for fi in u:
+                _, J = self.hand.fingers[fi].jacobians(parts[fi][None])
+                alignment.append(ellipsoid_alignment(J[0], H[k, :3, :3].T @ obj.normals[contact[k, fi]]))
+            radius = min(self.hand.fingers[fi].tip_radius for fi in u)
+            d, s = com_score(points, obj.com, self.torque_scale)
+            out[int(k)] = FrameGrasp("closed", H[k], q[k].copy(), contact[k].copy(), eps, d, s, float(np.mean(alignment)),
+                                     curvature_score(obj.curvature[contact[k, u]], radius))
+        return out

@@ -73,8 +73,9 @@ class FingerChain:
         local = A + s * B + c * C
         R = np.empty((len(q), self.dof, 3, 3))
         p = np.empty((len(q), self.dof, 3))
-        R_prev, p_prev = np.eye(3), np.zeros(3)
-        for j in range(self.dof):
+        R_prev, p_prev = local[:, 0], t[0]  # the hand frame is the identity: its products are exact copies
+        R[:, 0], p[:, 0] = R_prev, p_prev
+        for j in range(1, self.dof):
             p_prev = p_prev + R_prev @ t[j]
             R_prev = R_prev @ local[:, j]
             R[:, j], p[:, j] = R_prev, p_prev
@@ -101,18 +102,27 @@ class FingerChain:
         return tips, J.transpose(0, 2, 1)
 
     def ik(self, targets: np.ndarray, q0: np.ndarray, lower: np.ndarray, upper: np.ndarray, tolerance: float,
-           iterations: int = 10, damping: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
-        """Batched damped least squares within [lower, upper], until every tip is within `tolerance` (m) or
-        `iterations` are spent: configurations (N, k) and their tip errors (N,)."""
+           iterations: int = 10, damping: float = 1e-3, groups: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Batched damped least squares within [lower, upper]: configurations (N, k) and their tip errors (N,).
+
+        Rows of one group (`groups`, (N,) labels; one group by default) stop together, once every tip of the group
+        is within `tolerance` (m) or `iterations` are spent: many independent batches are solved in one call, each
+        row's steps the same as in a call of its group alone."""
         q = np.clip(np.array(q0, dtype=float), lower, upper)
         eye = damping**2 * np.eye(3)
+        label = np.zeros(len(q), int) if groups is None else np.unique(groups, return_inverse=True)[1].ravel()
+        active = np.arange(len(q))
         for _ in range(iterations):
-            tips, J = self.jacobians(q)
-            err = targets - tips
-            if np.max(np.einsum("ij,ij->i", err, err)) < tolerance**2:
+            tips, J = self.jacobians(q[active])
+            err = targets[active] - tips
+            worst = np.zeros(label.max(initial=0) + 1)
+            np.maximum.at(worst, label[active], np.einsum("ij,ij->i", err, err))
+            moving = worst[label[active]] >= tolerance**2
+            if not moving.any():
                 break
+            active, J, err = active[moving], J[moving], err[moving]
             step = np.linalg.solve(J @ J.transpose(0, 2, 1) + eye, err[:, :, None])
-            q = np.clip(q + (J.transpose(0, 2, 1) @ step)[:, :, 0], lower, upper)
+            q[active] = np.clip(q[active] + (J.transpose(0, 2, 1) @ step)[:, :, 0], lower, upper)
         return q, np.linalg.norm(targets - self.tip_positions(q), axis=1)
 
     def shape_poses(self, q: np.ndarray) -> np.ndarray:
