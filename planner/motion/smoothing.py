@@ -26,6 +26,7 @@ from planner.motion.trajectory import Trajectory, rest_to_rest
 from planner.motion.validities import Validities
 
 LEAVING, REACHING = ("lift", "retreat"), ("approach", "set-down")  # contact motions starting / ending at the object
+CORNERS = (0.5, 0.25, 0.1)  # a vertex's corner cut spans this share of the segments before and after it, tried in turn
 RESTS = ("closing", "opening")  # a hand closes on the object or lets go of it: the robot rests before and after
 
 
@@ -97,7 +98,8 @@ class Smoother:
         """The run's pieces timed rest to rest at every vertex, then shortened by checked ramps in three passes: from
         the first vertex to the farthest it reaches by a rest-to-rest ramp, and on from there (the path's big
         detours, each ramp checked once); around each vertex left (from halfway along the segment before to halfway
-        along the one after: short ramps, few checks, no stop left where one is valid); between random times, at most
+        along the one after, else a quarter, a tenth of the way: short ramps, few checks, no stop left where one is
+        valid); between random times, at most
         `attempts` of them. Each pass stops once the run's collision checks reach `budget`."""
         timed = [(p, rest_to_rest(p.path, self.vmax, self.amax)) for p in pieces]
         timed = [(p, t) for p, t in timed if t is not None]
@@ -114,10 +116,12 @@ class Smoother:
                 run.marks = np.delete(run.marks, np.arange(i + 1, j))
             i += 1
         for k in range(1, len(run.marks) - 1):
-            if run.checks >= budget:
-                break
-            m = run.marks
-            run.attempt(0.5 * (m[k - 1] + m[k]), 0.5 * (m[k] + m[k + 1]))
+            for part in CORNERS:  # a corner cut nearer the vertex leaves the checked path less: more likely valid
+                if run.checks >= budget:
+                    break
+                m = run.marks
+                if run.attempt(m[k] - part * (m[k] - m[k - 1]), m[k] + part * (m[k + 1] - m[k])):
+                    break
         for _ in range(attempts):
             if run.checks >= budget:
                 break
