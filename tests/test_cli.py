@@ -113,7 +113,8 @@ def test_version():
 def test_task_is_the_same_positional_in_every_command():
     commands = _commands()
     takes_task = {name for name, c in commands.items() if any(a.dest == "task" for a in c.arguments)}
-    assert takes_task == {"workbench", "check", "plan", "roadmap", "grasps", "bench collision", "bench double-grasps", "bench motion"}
+    assert takes_task == {"workbench", "check", "plan", "roadmap", "grasps", "bench collision", "bench double-grasps", "bench motion",
+                          "bench grasps"}
     for name in takes_task:
         (task,) = [a for a in commands[name].arguments if a.dest == "task"]
         assert task.option_strings == [] and task.type is task_argument and task.nargs == "?", name
