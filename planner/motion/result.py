@@ -51,8 +51,8 @@ class MotionParams:
     contact_env_clearance: float = bounded(0.004, 0.0, 0.05, "m", "... and this far between checks")
     contact_penetration: float = bounded(0.001, 1e-5, 0.01, "m", "hand-object pairs touch at most this deep between checks (0 at them)")
     contact_coarse: int = bounded(3, 1, 100, "(factor)", "contact checks at every k-th configuration with k-times margins first (1: dense)")
-    strategy: str = described("auto", "handover: through a double grasp; table: one hand sets the object down where the other takes it; "
-                              "auto: the handover, the table when it fails", tuple(STRATEGIES))
+    strategy: str = described("auto", "handover: a double grasp; table: set down for the other hand; auto: handover, else table",
+                              tuple(STRATEGIES))
     table_placements: int = bounded(6, 1, 1000, "placements", "table: intermediate placements both arms reach tried, best first")
     table_candidates: int = bounded(8, 1, 1000, "motions", "table: (placement, pick grasp, place grasp) motions tried in all")
     placement_spacing: float = bounded(0.1, 0.01, 1.0, "m", "table: grid spacing of the positions on each support")
