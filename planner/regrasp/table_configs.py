@@ -53,6 +53,13 @@ def table_candidates(scene: Scene, pick: GraspList, place: GraspList, configs: G
     both = np.flatnonzero(placements.reached[:, columns].all(axis=1))
     pick_order = np.lexsort((np.arange(len(hp.rank)), -hp.score))
     place_order = np.lexsort((np.arange(len(hq.rank)), -hq.score))
+    def tucked(q: np.ndarray, arm: str, free: str, T: np.ndarray) -> np.ndarray:
+        """q with the free arm as it is at the start (out of the way, as the task's author posed it) when that is
+        collision-free, else as sampled (near rest)."""
+        out = q.copy()
+        out[robot.arm_idx[free]] = scene.q_initial[robot.arm_idx[free]]
+        return q if sampler.collision.in_collision(out, T, (arm,)) else out
+
     for k in both[:max_placements]:
         T = placements.pose[k]
         takes: dict[int, np.ndarray | None] = {}
@@ -66,8 +73,8 @@ def table_candidates(scene: Scene, pick: GraspList, place: GraspList, configs: G
                 s = int(hq.rank[j])
                 if j not in takes:
                     got = sampler.grasp_configuration(b, T @ place.hand_pose[s], place.finger_q[s], T, hq.q[j], rng)
-                    takes[j] = None if got is None else got[0]
+                    takes[j] = None if got is None else tucked(got[0], b, a, T)
                 if takes[j] is None:
                     dropped["the placing hand cannot take it there with its grasp"] += 1
                     continue
-                yield TableCandidate(int(k), T, r, s, hp.q[i], found[0], takes[j], hq.q[j])
+                yield TableCandidate(int(k), T, r, s, hp.q[i], tucked(found[0], a, b, T), takes[j], hq.q[j])
