@@ -86,7 +86,8 @@ def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList,
         return out
     progress(0.0, "stable placements of the object")
     placements, seconds = stable_placements(scene, PlacementParams(p.placement_spacing, p.placement_headings,
-                                                                   p.placement_min_probability, p.placement_seeds, 0.02), progress)
+                                                                   p.placement_min_probability, p.placement_seeds,
+                                                                   p.placement_tolerance), progress)
     started = time.perf_counter()
     out.stages, out.seconds = list(placements.stages), list(seconds)
     grasp_configs, params = configs

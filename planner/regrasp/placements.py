@@ -141,9 +141,8 @@ def stable_placements(scene: Scene, p: PlacementParams, progress: Progress = no_
     flags_arr = np.array(flags, bool).reshape(-1, len(arms))
     log.done("reached by an arm", int(flags_arr.any(axis=1).sum()), f"{len(reached)} positions tried, {p.seeds} IK starts per arm")
     log.done("reached by both arms", int(flags_arr.all(axis=1).sum()), "where one hand can set it down for the other")
-    centre = lambda T: T[:3, :3] @ com + T[:3, 3]  # noqa: E731
-    ends = [centre(scene.object_initial), centre(scene.object_final)]
-    travel = [sum(np.linalg.norm(centre(T) - e) for e in ends) for _, T, _ in clear]
+    ends = [scene.object_initial[:3, :3] @ com + scene.object_initial[:3, 3], scene.object_final[:3, :3] @ com + scene.object_final[:3, 3]]
+    travel = [sum(np.linalg.norm(T[:3, :3] @ com + T[:3, 3] - e) for e in ends) for _, T, _ in clear]
     order = sorted(range(len(clear)), key=lambda i: (-int(flags_arr[i].all()), round(travel[i], 6), -clear[i][2], i))
     return Placements(arms, [clear[i][0] for i in order], log.stages,
                       np.array([clear[i][1] for i in order]).reshape(-1, 4, 4), np.array([clear[i][2] for i in order]),
