@@ -7,6 +7,7 @@ sample re-checked by the independent oracle (tests/oracle.py).
 """
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ from planner.model.task import load_task
 from planner.regrasp.placements import PlacementParams, stable_placements
 
 DESK_TOP = 0.72  # m: the default desk's top surface (assets/tasks/default.toml)
+EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
 
 
 def cube_task(folder: Path) -> Path:
@@ -69,7 +71,7 @@ def test_a_cube_is_handed_over_through_the_table(tmp_path):
     assert [a["strategy"] for a in m.alternatives] == ["handover"] and m.alternatives[0]["failure"].startswith("double grasps:")
     assert session.result("double_grasps").failure  # recorded, and the pipeline went on to the motion
     # held by one hand, at rest, held by the other
-    runs = [int(h) for k, h in enumerate(m.holder) if k == 0 or h != m.holder[k - 1]]
+    runs = held_spans(m)
     assert len(runs) == 5 and runs[0] == runs[2] == runs[4] == -1 and runs[1] >= 0 and runs[3] >= 0 and runs[1] != runs[3], runs
     first_held, second_held = (np.flatnonzero(m.holder == h) for h in (runs[1], runs[3]))
     between = np.arange(first_held[-1] + 1, second_held[0])
@@ -90,3 +92,24 @@ def test_a_cube_is_handed_over_through_the_table(tmp_path):
     branch = session.branch(tmp_path / "handover", "motion")
     with pytest.raises(StepFailed, match="handover strategy: double grasps: no compatible pair"):
         run_pipeline(branch, params={"motion": {"strategy": "handover"}})
+
+
+def held_spans(m) -> list[int]:
+    """The holder of each span of samples where it stays the same (-1: the object at rest)."""
+    return [int(h) for k, h in enumerate(m.holder) if k == 0 or h != m.holder[k - 1]]
+
+
+@pytest.mark.slow
+def test_the_table_can_be_forced_on_the_default_task(tmp_path):
+    """`--set motion.strategy=table`: the statuette, which two hands can exchange in the air, goes through the table."""
+    shutil.copytree(EXAMPLE, tmp_path / "example")
+    session = Session.open(tmp_path / "example")
+    if "motion" in session.finished():
+        session = session.branch(tmp_path / "branch", "motion")
+    run_pipeline(session, params={"motion": {"strategy": "table"}})
+    m = session.result("motion")
+    assert not m.failure and m.strategy == "table" and not m.alternatives  # the handover was not tried
+    spans = held_spans(m)
+    assert len(spans) == 5 and spans[::2] == [-1, -1, -1] and min(spans[1], spans[3]) >= 0 and spans[1] != spans[3], spans
+    bad = motion_collisions(session, m)
+    assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"

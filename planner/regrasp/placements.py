@@ -1,7 +1,8 @@
 """Stable placements of the object on the scene's supports: where a hand may set it down for the other to take it.
 
-The object's stable resting poses (trimesh's `compute_stable_poses`: the convex hull's faces the centre of mass
-projects into, with the probability of landing on each) are put on every support (the top face of an upright box
+The object's resting poses (those of the task's placements, where it rests and the grasps were chosen for, then
+trimesh's `compute_stable_poses`: the convex hull's faces the centre of mass projects into, with the probability of
+landing on each) are put on every support (the top face of an upright box
 obstacle: the desk top, a shelf) on a grid of positions, at several headings. A placement is kept when the object
 there is clear of every other obstacle and of the robot's fixed base; each arm's reach of its centre of mass is
 recorded (reach.py: the fingertip centre brought there by the arm and the torso, collision-free). The stages say how
@@ -56,14 +57,20 @@ class Placements:
 
 
 def resting_poses(scene: Scene, min_probability: float) -> tuple[list[np.ndarray], list[float]]:
-    """The object's stable resting poses (object frame to a frame whose origin is under the centre of mass, on the
-    support's plane z = 0) at least `min_probability` likely, most likely first."""
+    """The object's resting poses (object frame to a frame whose origin is under the centre of mass, on the support's
+    plane z = 0): first those of the task's initial and final placements (the object rests there, and the hands' grasps
+    were chosen for them), then trimesh's stable poses at least `min_probability` likely, most likely first, each
+    resting on a face no earlier one rests on. A task's pose takes the probability of trimesh's pose on the same face
+    (0 when it has none)."""
     mesh = scene.object_mesh
     transforms, probabilities = mesh.compute_stable_poses(center_mass=mesh.center_mass)
+    stable = sorted(zip(transforms, probabilities), key=lambda tp: -tp[1])
     out, kept = [], []
-    for T, p in sorted(zip(transforms, probabilities), key=lambda tp: -tp[1]):
-        if p < min_probability:
+    for T, p in [(T, None) for T in (scene.object_initial, scene.object_final)] + stable:
+        if (p is not None and p < min_probability) or any(np.dot(down(T), down(U)) > UPRIGHT for U in out):
             continue
+        if p is None:
+            p = next((q for U, q in stable if np.dot(down(T), down(U)) > UPRIGHT), 0.0)
         T = np.array(T, float)
         com = T[:3, :3] @ mesh.center_mass + T[:3, 3]
         low = float((mesh.vertices @ T[:3, :3].T + T[:3, 3])[:, 2].min())
@@ -71,6 +78,11 @@ def resting_poses(scene: Scene, min_probability: float) -> tuple[list[np.ndarray
         out.append(T)
         kept.append(float(p))
     return out, kept
+
+
+def down(T: np.ndarray) -> np.ndarray:
+    """The direction, in the object's frame, towards the support it rests on at pose T."""
+    return T[:3, :3].T @ np.array([0.0, 0.0, -1.0])
 
 
 def support_grid(support: Obstacle, margin: float, spacing: float) -> np.ndarray:
@@ -102,7 +114,7 @@ def stable_placements(scene: Scene, p: PlacementParams, progress: Progress = no_
     each stage."""
     log = StageLog()
     rests, probabilities = resting_poses(scene, p.min_probability)
-    log.done("resting poses", len(rests), f"of the object, at least {p.min_probability:g} likely")
+    log.done("resting poses", len(rests), f"the task's, then others at least {p.min_probability:g} likely")
     mesh = scene.object_mesh
     com = np.asarray(mesh.center_mass, float)
     margin = float(np.linalg.norm((mesh.vertices - com)[:, :2], axis=1).max())
