@@ -8,7 +8,6 @@ it tried failed, and, when none worked, the stage that removed them.
 """
 from __future__ import annotations
 
-import itertools
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -22,6 +21,7 @@ from planner.handover.double_grasps import DoubleGrasps
 from planner.handover.grasp_configs import GraspConfigParams, GraspConfigs
 from planner.model.task import Scene
 from planner.motion.double_grasp import DoubleGraspPlanner
+from planner.motion.phase import Phase
 from planner.motion.piece import HandGrasp, Piece, PieceFailed
 from planner.motion.result import MotionParams
 from planner.motion.table_handover import plan_table
@@ -79,7 +79,9 @@ def handover(make: Callable[[], DoubleGraspPlanner], pick: GraspList, place: Gra
 def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList, place: GraspList,
           configs: tuple[GraspConfigs, GraspConfigParams] | None, p: MotionParams, rng: np.random.Generator,
           progress: Progress) -> Attempt:
-    """The first (intermediate placement, pick grasp, place grasp), best first, whose whole motion is valid."""
+    """The first (intermediate placement, pick grasp, place grasp), best first, whose whole motion is valid: at most
+    `table_candidates` tried, spread evenly over the first `table_placements` placements; a pick grasp whose Grasp or
+    Set down failed at a placement is not tried there again with another place grasp (they change neither)."""
     out = Attempt("table")
     if configs is None:
         out.failure = "grasp configurations: not given to the motion planner"
@@ -95,8 +97,14 @@ def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList,
         out.failure = f"arms: the {grasp_configs.picking_arm} arm picks and places, so no other hand takes the object"
         return out
     dropped: Counter = Counter()
-    candidates = table_candidates(scene, pick, place, grasp_configs, params, placements, p.table_placements, dropped, rng)
-    for c in itertools.islice(candidates, p.table_candidates):
+    per_placement = -(-p.table_candidates // p.table_placements)  # tries spread over the placements
+    failed_here: Counter = Counter()
+    failed_before_regrasp: set[tuple[int, int]] = set()  # (placement, pick grasp) whose failure no place grasp changes
+    for c in table_candidates(scene, pick, place, grasp_configs, params, placements, p.table_placements, dropped, rng):
+        if len(out.tried) >= p.table_candidates:
+            break
+        if failed_here[c.placement] >= per_placement or (c.placement, c.pick_rank) in failed_before_regrasp:
+            continue
         progress(len(out.tried) / p.table_candidates, f"table handover {len(out.tried) + 1}: placement {c.placement + 1}")
         planner = make()
         try:
@@ -105,6 +113,9 @@ def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList,
         except PieceFailed as exc:
             out.tried.append(f"placement {c.placement + 1} on {placements.support[c.placement]}, grasps {c.pick_rank + 1} and "
                              f"{c.place_rank + 1}: {exc}")
+            failed_here[c.placement] += 1
+            if exc.phase in (Phase.GRASP, Phase.SET_DOWN):
+                failed_before_regrasp.add((c.placement, c.pick_rank))
             continue
         out.tried.append("")
         out.pieces, out.planner, out.intermediate = pieces, planner, c.pose

@@ -28,8 +28,9 @@ def plan_table(planner: DoubleGraspPlanner, q_grasp: np.ndarray, q_set: np.ndarr
     idx = scene.robot.hand_idx
 
     # exact grasps, so the object's pose is continuous: the picking hand sets it down exactly at the placement as it
-    # holds it, the placing hand places it exactly as it takes it; each hand open until it approaches, then keeping its
-    # fingers as they let go until the end
+    # holds it; the placing hand takes it exactly at its listed grasp (its configuration there is within the IK
+    # tolerance of it, its fingers closing on the object as the list has them), and places it as it took it; each hand
+    # open until it approaches, then keeping its fingers as they let go until the end
     g_a = np.linalg.inv(oi) @ arms.palm(q_grasp, a.arm)
     q_set = hand.set(hand.set(q_set, a.arm, a.fingers), b.arm, hand.open[idx[b.arm]])
     q_set = arms.refine(q_set, a.arm, pose @ g_a, None, SET_DOWN, "set-down")
@@ -38,7 +39,7 @@ def plan_table(planner: DoubleGraspPlanner, q_grasp: np.ndarray, q_set: np.ndarr
     down_here, first_here = planner.set_downs(SET_DOWN, q_set, a.arm, g_a, pose)
     let_a, released_a = planner.release(SET_DOWN, q_set, a, pose)
 
-    q_take = hand.set(q_take, a.arm, let_a)
+    q_take = arms.refine(hand.set(q_take, a.arm, let_a), b.arm, pose @ b.palm_in_object, None, REGRASP, "regrasp")
     g_b = np.linalg.inv(pose) @ arms.palm(q_take, b.arm)
     q_place = hand.set(arms.refine(hand.set(q_place, a.arm, let_a), b.arm, of @ g_b, None, PLACE, "place"), b.arm, b.fingers)
     takes, first_take = planner.pick_up(REGRASP, q_take, b, pose)
