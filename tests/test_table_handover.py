@@ -7,6 +7,7 @@ sample re-checked by the independent oracle (tests/oracle.py).
 """
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -15,12 +16,15 @@ import pytest
 from generated_objects import TASK_TEXT_ROBOT
 from oracle import Oracle, motion_collisions
 
+from planner.core.results import load_result, save_result
 from planner.core.runner import run_pipeline
 from planner.core.session import Session
 from planner.core.steps import StepFailed
 from planner.model.shapes import box, obj_text, on_desk
 from planner.model.task import load_task
+from planner.motion.result import PHASES, TABLE_PHASES, Motion
 from planner.regrasp.placements import PlacementParams, stable_placements
+from workbench.layers.motion import PHASE_COLORS, route_segments, table_one
 
 DESK_TOP = 0.72  # m: the default desk's top surface (assets/tasks/default.toml)
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
@@ -113,3 +117,33 @@ def test_the_table_can_be_forced_on_the_default_task(tmp_path):
     assert len(spans) == 5 and spans[::2] == [-1, -1, -1] and min(spans[1], spans[3]) >= 0 and spans[1] != spans[3], spans
     bad = motion_collisions(session, m)
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
+
+
+def _motion(phases: list[int], names: tuple, **extra) -> Motion:
+    """A small motion result with these phase integers (robot of 2 joints, 2 arms)."""
+    n = len(phases)
+    rows = [{"phase": name, "nodes_planning": 0, "nodes_validating": 0, "edges_invalidated": 0, "rrt_calls": 0, "searches": 0,
+             "transit_checks": 0, "smoothing_checks": 0, "path_length": 0.0, "straight_distance": 0.0, "duration": 0.0}
+            for name in names]
+    return Motion("roadmap", -1, [""], rows, ["right", "left"], {}, [], "", np.arange(n) / 30.0, np.zeros((n, 2)),
+                  np.array(phases, np.int8), np.tile(np.eye(4), (n, 1, 1)), np.full(n, -1, np.int8), np.full(n, -1, np.int8),
+                  np.zeros((n, 2, 3)), np.zeros(5, np.int64), ("a", "b"), names, **extra)
+
+
+def test_a_table_motion_names_its_phases_and_keeps_them_in_its_files(tmp_path):
+    table = _motion([0, 4, 5, 1, 2, 3], TABLE_PHASES, strategy="table", intermediate=tuple(map(tuple, np.eye(4))),
+                    alternatives=({"strategy": "handover", "failure": "double grasps: none"},))
+    assert [table.phase_name(int(p)) for p in table.phase] == ["Grasp", "Set down", "Regrasp", "Carry", "Place", "Rest"]
+    assert table.phase_name(9) == "phase 9"  # a session is untrusted: an integer it names no phase for
+    text = table_one(table, None)
+    assert "Set down" in text.splitlines()[0] and "Regrasp" in text.splitlines()[0]
+    _, colors = route_segments(table)
+    assert tuple(colors[0][0]) == PHASE_COLORS[4] and tuple(colors[2][0]) == PHASE_COLORS[5]  # two wrists a sample
+    save_result(table, tmp_path, "table")
+    again = load_result(Motion, tmp_path, "table")
+    assert (again.phase_names, again.strategy, again.alternatives[0]["strategy"]) == (TABLE_PHASES, "table", "handover")
+    handover = _motion([0, 1, 2, 3], PHASES)
+    save_result(handover, tmp_path, "handover")
+    written = json.loads((tmp_path / "handover.json").read_text())
+    assert not {"phase_names", "strategy", "alternatives", "intermediate"} & set(written)  # as sessions before them
+    assert load_result(Motion, tmp_path, "handover").phase_names == PHASES

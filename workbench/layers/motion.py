@@ -136,11 +136,11 @@ class MotionLayer(StepLayer):
         else:
             used = (f"Double grasp **{result.double_grasp + 1}** of {len(result.tried)} tried" if result.double_grasp >= 0
                     else f"No double grasp worked ({len(result.tried)} tried)")
-        used += "".join(f"; the {plain(a.get('strategy', '?'))} strategy failed: {plain(a.get('failure', ''))}"
+        used += "".join(f"; the {plain(str(a.get('strategy', '?')))} strategy failed: {plain(str(a.get('failure', '')))}"
                         for a in result.alternatives if isinstance(a, dict))
         failed = [f"{k + 1}: {plain(why)}" for k, why in enumerate(result.tried) if why]
         text = (f"{used}; planner *{plain(result.planner)}*, {len(result.t)} samples, {result.duration:.2f} s.\n\n"
-                f"Wrist routes: " + ", ".join(f"{plain(p)} {c}" for p, c in zip(result.phase_names, PHASE_COLOR_NAMES)) + ".\n\n")
+                f"Wrist routes: " + ", ".join(f"{plain(str(p))} {c}" for p, c in zip(result.phase_names, PHASE_COLOR_NAMES)) + ".\n\n")
         if result.phases:
             text += table_one(result, self._seconds())
         if failed and not result.failure:
