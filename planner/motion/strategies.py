@@ -28,8 +28,6 @@ from planner.motion.table_handover import plan_table
 from planner.regrasp.placements import PlacementParams, stable_placements
 from planner.regrasp.table_configs import table_candidates
 
-CARRY_FAILURES = 2  # a place grasp whose Carry failed at this many placements is not tried at another
-
 
 @dataclass
 class Attempt:
@@ -83,8 +81,9 @@ def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList,
           progress: Progress) -> Attempt:
     """The first (intermediate placement, pick grasp, place grasp), best first, whose whole motion is valid: at most
     `table_candidates` tried, spread evenly over the first `table_placements` placements; a pick grasp whose Grasp or
-    Set down failed at a placement is not tried there again with another place grasp (they change neither), a place
-    grasp whose Place or Rest failed is not tried again, nor one whose Carry failed twice."""
+    Set down failed at a placement is not tried there again with another place grasp (they change neither), nor a place
+    grasp whose Carry, Place or Rest failed (carried from a placement that both arms reach to the final one, the next
+    place grasp is likelier to get there than the next placement)."""
     out = Attempt("table")
     if configs is None:
         out.failure = "grasp configurations: not given to the motion planner"
@@ -103,12 +102,12 @@ def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList,
     per_placement = -(-p.table_candidates // p.table_placements)  # tries spread over the placements
     failed_here: Counter = Counter()
     failed_before_regrasp: set[tuple[int, int]] = set()  # (placement, pick grasp) whose failure no place grasp changes
-    failed_carrying: Counter = Counter()  # place grasp -> its failures in Carry, Place or Rest
+    failed_carrying: set[int] = set()  # place grasps that failed in Carry, Place or Rest
     for c in table_candidates(scene, pick, place, grasp_configs, params, placements, p.table_placements, dropped, rng):
         if len(out.tried) >= p.table_candidates:
             break
         if (failed_here[c.placement] >= per_placement or (c.placement, c.pick_rank) in failed_before_regrasp
-                or failed_carrying[c.place_rank] >= CARRY_FAILURES):
+                or c.place_rank in failed_carrying):
             continue
         progress(len(out.tried) / p.table_candidates, f"table handover {len(out.tried) + 1}: placement {c.placement + 1}")
         planner = make()
@@ -121,8 +120,8 @@ def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList,
             failed_here[c.placement] += 1
             if exc.phase in (Phase.GRASP, Phase.SET_DOWN):
                 failed_before_regrasp.add((c.placement, c.pick_rank))
-            elif exc.phase != Phase.REGRASP:  # the place grasp's part: at the final placement (Place, Rest) it fails anywhere
-                failed_carrying[c.place_rank] += 1 if exc.phase == Phase.CARRY else CARRY_FAILURES
+            elif exc.phase != Phase.REGRASP:  # the place grasp's part, carried to the final placement and placed there
+                failed_carrying.add(c.place_rank)
             continue
         out.tried.append("")
         out.pieces, out.planner, out.intermediate = pieces, planner, c.pose
