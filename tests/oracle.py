@@ -235,3 +235,37 @@ class Oracle:
 
 def hit(a, Ta, b, Tb) -> bool:
     return fcl.collide(fcl.CollisionObject(a, _tf(Ta)), fcl.CollisionObject(b, _tf(Tb)), fcl.CollisionRequest(), fcl.CollisionResult()) > 0
+
+
+def _object_between(session, motion, k: int, q: np.ndarray) -> np.ndarray:
+    """The object's pose at q on the way to sample k (which holds for the whole interval before it): carried rigidly by
+    the holder's palm, else where sample k has it."""
+    h = int(motion.holder[k])
+    if h < 0:
+        return motion.object_pose[k]
+    robot = session.scene.robot
+    frame = robot.palm_frame(motion.arms[h])
+    grasp = np.linalg.inv(robot.frame_placement(motion.q[k], frame)) @ motion.object_pose[k]
+    return robot.frame_placement(q, frame) @ grasp
+
+
+def motion_collisions(session, m) -> list[tuple]:
+    """(sample, fraction, pairs) of every colliding configuration of a planned motion: each sample and nine more on the
+    chord before it, the holding and working hands excused as `Oracle.collisions` says, the object's supports while
+    it is lifted or set down (a hand holding it and working at it)."""
+    oracle = Oracle(session.scene)
+    arms = m.arms
+    bad = []
+    lifting = {int(i) for i in np.flatnonzero((m.holder >= 0) & (m.active == m.holder))}  # lift and set-down
+    assert not oracle.collisions(m.q[0], m.object_pose[0], None, None, False)
+    for k in range(1, len(m.t)):  # the interval before sample k belongs to sample k's motion
+        holder = arms[m.holder[k]] if m.holder[k] >= 0 else None
+        active = arms[m.active[k]] if m.active[k] >= 0 else None
+        fingers = session.scene.robot.hand_idx[active] if active else []
+        closing = bool(np.any(m.q[k - 1, fingers] != m.q[k, fingers]))
+        for s in np.linspace(0.1, 1.0, 10):
+            q = m.q[k - 1] + s * (m.q[k] - m.q[k - 1])
+            found = oracle.collisions(q, _object_between(session, m, k, q), holder, active, k in lifting, closing)
+            if found:
+                bad.append((k, round(float(s), 1), found[:3]))
+    return bad

@@ -418,7 +418,7 @@ def test_a_finger_whose_opening_would_hit_an_obstacle_opens_less(example):
     from planner.collision.situation import Situation, fingertip_geometries
     from planner.core.session import Session
     from planner.model.environment import Obstacle
-    from planner.motion.step import hand_grasp
+    from planner.motion.strategies import hand_grasp
 
     scene, roadmap, _ = example
     session = Session.open(EXAMPLE)

@@ -254,7 +254,7 @@ def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int =
             for _ in range(repeat):
                 start = time.perf_counter()
                 motion, seconds = plan_motion(scene, results["pick_grasps"], results["place_grasps"], results["double_grasps"],
-                                              results["roadmap"], MotionParams(planner=planner),
+                                              results["roadmap"], MotionParams(planner=planner, strategy="handover"),
                                               np.random.default_rng(step_seed(seed, "motion")))
                 timed.append((time.perf_counter() - start, seconds))
             elapsed, seconds = min(timed, key=lambda run: run[0])

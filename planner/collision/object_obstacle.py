@@ -46,8 +46,8 @@ class ObjectCollision:
         self.object_geometry = coal_mesh(scene.object_mesh)
         self.com = np.asarray(scene.object_mesh.center_mass, float)
         fixed = [o for o in cm.geometry.geometryObjects[:cm.n_robot_geoms] if o.parentJoint == 0]  # the robot's fixed base
-        self.static = ObstacleTest([(ob.coal_shape(), ob.pose) for ob in scene.environment]
-                                   + [(o.geometry, o.placement.homogeneous) for o in fixed], params.env_padding)
+        self.fixed_base = [(o.geometry, o.placement.homogeneous) for o in fixed]
+        self.static = ObstacleTest([(ob.coal_shape(), ob.pose) for ob in scene.environment] + self.fixed_base, params.env_padding)
 
     @staticmethod
     def subset(holding: tuple[str, ...]) -> str:

@@ -49,18 +49,25 @@ def warn_on_stderr(message: str) -> None:
 
 def run_pipeline(session: Session, until: str | None = None, params: Mapping[str, Mapping[str, Any]] | None = None,
                  progress: ProgressFactory | None = None, warn: Callable[[str], None] = warn_on_stderr) -> list[str]:
-    """Run, in order, every step up to `until` that the session has not finished; returns their names.
+    """Run, in order, every step up to `until` that the session has not finished; returns their names. A recoverable
+    step's failure stops the run only when it is the last step asked for.
 
     The task is validated first, as `regrasp check` does (InvalidTask, before any step)."""
     require_valid(session.scene, warn)
     params = params or {}
     done = {r["name"]: r for r in session.records}
     ran = []
-    for step in steps_until(until):
+    steps = steps_until(until)
+    for step in steps:
+        goes_on = step.recoverable and step is not steps[-1]  # a later step falls back (the double grasps: the table)
         if step.name in done:
-            if done[step.name]["stats"].get("failure"):
+            if done[step.name]["stats"].get("failure") and not goes_on:
                 raise StepFailed(step.name, done[step.name]["stats"]["failure"])
             continue
-        run_step(session, step, params.get(step.name), progress(step) if progress else no_progress)
+        try:
+            run_step(session, step, params.get(step.name), progress(step) if progress else no_progress)
+        except StepFailed:
+            if not goes_on:
+                raise
         ran.append(step.name)
     return ran

@@ -73,6 +73,7 @@ class Step:
     result: type
     run: Callable[[StepContext], StepOutput]
     seed_name: str = ""  # the name its generator's seed is derived from (default: its own); steps sharing one draw alike
+    recoverable: bool = False  # its failure leaves a later step a fallback: the pipeline goes on past it (see runner.py)
 
     def seed(self, session_seed: int) -> int:
         """The seed of this step's generator in a session with this seed."""

@@ -18,6 +18,7 @@ run at once (runner.py); where a transit fails, the next candidate end of that h
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -37,7 +38,7 @@ from planner.motion.transit import TransitStats
 from planner.motion.transit_stage import TransitStage
 from planner.motion.validities import Validities
 
-GRASP, CARRY, PLACE, REST = Phase
+GRASP, CARRY, PLACE, REST = Phase.GRASP, Phase.CARRY, Phase.PLACE, Phase.REST
 
 
 class DoubleGraspPlanner:
@@ -78,6 +79,86 @@ class DoubleGraspPlanner:
             out.append(target)
         return out
 
+    def take(self, phase: Phase, g: HandGrasp, around: Situation, closing: Situation, label: str):
+        """A hand's (pre-grasp, pre-shape + approach + closing) candidate builder, for a grasp at a placement and at the
+        exchange alike: the hand opens fully at its pre-grasp."""
+        c, hand = self.contact, self.hand
+        opened = hand.open[self.scene.robot.hand_idx[g.arm]]
+
+        def build(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
+            pre, approach = shaped[0], shaped[1][::-1]
+            q_pre = hand.set(approach[0], g.arm, opened)
+            out = [c.contact(phase, "approach", approach, around, g.arm)]
+            out = c.fingers(phase, "pre-shape", q_pre, g.arm, pre, around) + out
+            out += c.fingers(phase, "closing", approach[-1], g.arm, g.fingers, closing)
+            c.ready(q_pre, around, phase, label)
+            return q_pre, out
+        return build
+
+    def pick_up(self, phase: Phase, q_grasp: np.ndarray, g: HandGrasp, pose: np.ndarray) -> tuple[Iterator, tuple]:
+        """(the candidates after the first, the first): a hand's (pre-grasp, pre-shape + approach + closing) onto the
+        object resting at `pose`, the hand at its grasp at q_grasp."""
+        static = Situation(None, pose)
+        closing = Situation(None, pose, fingertip_geometries(self.validities.cm, g.arm, g.touching))
+        approaches = self.contact.shaped(g, retreats(self.arms, q_grasp, g.arm, None, True, phase, "pre-grasp"), static, closing)
+        grasps = options(phase, "pre-grasp", approaches, self.take(phase, g, static, closing, "pre-grasp"))
+        return grasps, next(grasps)
+
+    def lift(self, phase: Phase, q_grasp: np.ndarray, g: HandGrasp, palm_in_object: np.ndarray, pose: np.ndarray
+             ) -> tuple[np.ndarray, list[Piece]]:
+        """(where the lift ends, its piece): the object, held at q_grasp, lifted off its support at `pose`, freest first."""
+        c, support = self.contact, self.contact.supports(pose)
+
+        def lift_off(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
+            lift = self.arms.straight(self.hand.set(q_grasp, g.arm, g.fingers), g.arm, offset, None, phase, "lift")
+            piece = c.contact(phase, "lift", lift, Situation(g.arm, palm_in_object, (), support), g.arm)
+            return lift[-1], [piece], c.ready(lift[-1], Situation(g.arm, palm_in_object), phase, "lift")
+
+        q_lifted, lifted, _ = next(freest(options(phase, "lift", iter(c.lifts(pose, q_grasp, g.arm, phase)), lift_off)))
+        return q_lifted, lifted
+
+    def set_downs(self, phase: Phase, q_down: np.ndarray, arm: str, palm_in_object: np.ndarray, pose: np.ndarray
+                  ) -> tuple[Iterator, tuple]:
+        """(the candidates after the first, the first): (above the placement, set-down) onto `pose`, the object held by
+        `arm` at q_down there, freest first."""
+        c, support = self.contact, self.contact.supports(pose)
+
+        def set_down(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
+            lower = self.arms.straight(q_down, arm, offset, None, phase, "above the placement")[::-1]
+            piece = c.contact(phase, "set-down", lower, Situation(arm, palm_in_object, (), support), arm)
+            return lower[0], [piece], c.ready(lower[0], Situation(arm, palm_in_object), phase, "above the placement")
+
+        downs = freest(options(phase, "set-down", iter(c.lifts(pose, q_down, arm, phase)), set_down))
+        return downs, next(downs)
+
+    def leave(self, situation: Situation, after: Situation, phase: Phase, arm: str):
+        """A retreat candidate's builder: the hand backing off in `situation`, a transit ready to start in `after`."""
+        def build(retreat: np.ndarray) -> list[Piece]:
+            piece = self.contact.contact(phase, "retreat", retreat, situation, arm)
+            self.contact.ready(retreat[-1], after, phase, "retreat")
+            return [piece]
+        return build
+
+    def release(self, phase: Phase, q_down: np.ndarray, g: HandGrasp, pose: np.ndarray) -> tuple[np.ndarray, list[Piece]]:
+        """(the hand's finger values, the pieces): a hand letting go of the object set down at `pose` (at q_down), then
+        retreating."""
+        c = self.contact
+        let_go = Situation(None, pose, fingertip_geometries(self.validities.cm, g.arm, g.touching))
+        let = c.letting_go(g, q_down, let_go)
+        opening = c.fingers(phase, "opening", q_down, g.arm, let, let_go)
+        q_let = self.hand.set(q_down, g.arm, let)
+        backing = itertools.chain(*retreats(self.arms, q_let, g.arm, None, True, phase, "retreat"))
+        return let, opening + next(options(phase, "retreat", backing, self.leave(let_go, Situation(None, pose), phase, g.arm)))
+
+    def rest(self, fingers: dict[str, np.ndarray], pose: np.ndarray) -> tuple[np.ndarray, list[Piece]]:
+        """(where the Rest transit ends, the hands opening there): q_final with each hand's fingers as they let go."""
+        q_end = self.scene.q_final
+        for arm, values in fingers.items():
+            q_end = self.hand.set(q_end, arm, values)
+        self.contact.ready(q_end, Situation(None, pose), REST, "final configuration")
+        return q_end, [] if np.allclose(q_end, self.scene.q_final) else [
+            self.contact.contact(REST, "hands open", np.stack([q_end, self.scene.q_final]), Situation(None, pose), None)]
+
     def plan(self, q_grasp: np.ndarray, q_exch: np.ndarray, q_place: np.ndarray, a: HandGrasp, b: HandGrasp) -> list[Piece]:
         """Every piece from q_initial to q_final through the double grasp (a: the picking hand, b: the placing hand; the
         same hand and grasp for a direct transfer, whose Carry takes the object to above its placement).
@@ -87,7 +168,6 @@ class DoubleGraspPlanner:
         candidate of that hand is tried."""
         scene, c, arms, hand, cm = self.scene, self.contact, self.arms, self.hand, self.validities.cm
         oi, of = scene.object_initial, scene.object_final
-        open_a, open_b = (hand.open[scene.robot.hand_idx[h.arm]] for h in (a, b))
 
         # exact grasps, so the object's pose is continuous where it changes hands: each hand holds it as its grasp and place
         # configurations do (within their IK tolerance of the listed grasp), and the exchange, in the air where both
@@ -104,47 +184,16 @@ class DoubleGraspPlanner:
             q_exch = arms.refine(q_exch, b.arm, x @ g_b, a.arm, CARRY, "exchange")
         static_i, static_f = Situation(None, oi), Situation(None, of)
         held_a, held_b = Situation(a.arm, g_a), Situation(b.arm, g_b)
-        tips_a, tips_b = fingertip_geometries(cm, a.arm, a.touching), fingertip_geometries(cm, b.arm, b.touching)
-        support_i, support_f = c.supports(oi), c.supports(of)
-        closing_a, closing_b = Situation(None, oi, tips_a), Situation(a.arm, g_a, tips_b)
 
-        def take(phase: Phase, g: HandGrasp, opened: np.ndarray, around: Situation, closing: Situation, label: str):
-            """A hand's (pre-grasp, pre-shape + approach + closing) candidate, for the first grasp and the exchange alike."""
-            def build(shaped: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, list[Piece]]:
-                pre, approach = shaped[0], shaped[1][::-1]
-                q_pre = hand.set(approach[0], g.arm, opened)
-                out = [c.contact(phase, "approach", approach, around, g.arm)]
-                out = c.fingers(phase, "pre-shape", q_pre, g.arm, pre, around) + out
-                out += c.fingers(phase, "closing", approach[-1], g.arm, g.fingers, closing)
-                c.ready(q_pre, around, phase, label)
-                return q_pre, out
-            return build
-
-        # Grasp: (pre-grasp, pre-shape + approach + closing) candidates
-        grasp = take(GRASP, a, open_a, static_i, closing_a, "pre-grasp")
-        approaches = c.shaped(a, retreats(arms, q_grasp, a.arm, None, True, GRASP, "pre-grasp"), static_i, closing_a)
-        grasps = options(GRASP, "pre-grasp", approaches, grasp)
-        first_grasp = next(grasps)
-
-        # Carry: the lift, (exchange pre-grasp, its approach and closing) candidates, the picking hand letting go and retreating
-        def lift_off(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
-            lift = arms.straight(hand.set(q_grasp, a.arm, a.fingers), a.arm, offset, None, CARRY, "lift")
-            piece = c.contact(CARRY, "lift", lift, Situation(a.arm, g_a, (), support_i), a.arm)
-            return lift[-1], [piece], c.ready(lift[-1], held_a, CARRY, "lift")
-
-        q_lifted, lifted, _ = next(freest(options(CARRY, "lift", iter(c.lifts(oi, q_grasp, a.arm, CARRY)), lift_off)))
+        # Grasp: (pre-grasp, pre-shape + approach + closing) candidates; Carry: the lift
+        grasps, first_grasp = self.pick_up(GRASP, q_grasp, a, oi)
+        q_lifted, lifted = self.lift(CARRY, q_grasp, a, g_a, oi)
         q_x = hand.set(q_exch, a.arm, a.fingers)
 
-        exchange = take(CARRY, b, open_b, held_a, closing_b, "exchange pre-grasp")
-
-        def leave(situation: Situation, after: Situation, phase: Phase, arm: str):
-            def build(retreat: np.ndarray) -> list[Piece]:
-                piece = c.contact(phase, "retreat", retreat, situation, arm)
-                c.ready(retreat[-1], after, phase, "retreat")
-                return [piece]
-            return build
-
         if not direct:  # the placing hand's exchange pre-grasp, approach and closing; the picking hand letting go
+            tips_a, tips_b = fingertip_geometries(cm, a.arm, a.touching), fingertip_geometries(cm, b.arm, b.touching)
+            closing_b = Situation(a.arm, g_a, tips_b)
+            exchange = self.take(CARRY, b, held_a, closing_b, "exchange pre-grasp")
             backoffs = retreats(arms, q_x, b.arm, a.arm, False, CARRY, "exchange pre-grasp")
             exchanges = options(CARRY, "exchange pre-grasp", c.shaped(b, backoffs, held_a, closing_b), exchange)
             first_exchange = next(exchanges)
@@ -155,41 +204,26 @@ class DoubleGraspPlanner:
 
             q_let = hand.set(q_both, a.arm, let_a)
             backing = itertools.chain(*retreats(arms, q_let, a.arm, b.arm, False, CARRY, "retreat", leaving=True))
-            retreat_a = next(options(CARRY, "retreat", backing, leave(released, held_b, CARRY, a.arm)))
+            retreat_a = next(options(CARRY, "retreat", backing, self.leave(released, held_b, CARRY, a.arm)))
 
         # Place: (above the placement, set-down) candidates; the picking hand keeps its fingers as they let go until the
         # end (opened near the object, they hit it); in a direct transfer it is the hand that holds the object
         q_down = q_place if direct else hand.set(q_place, a.arm, let_a)
-
-        def set_down(offset: np.ndarray) -> tuple[np.ndarray, list[Piece], float]:
-            lower = arms.straight(q_down, b.arm, offset, None, PLACE, "above the placement")[::-1]
-            piece = c.contact(PLACE, "set-down", lower, Situation(b.arm, g_b, (), support_f), b.arm)
-            return lower[0], [piece], c.ready(lower[0], held_b, PLACE, "above the placement")
-
-        downs = freest(options(PLACE, "set-down", iter(c.lifts(of, q_place, b.arm, PLACE)), set_down))
-        first_down = next(downs)
-        let_go = Situation(None, of, tips_b)
-        let_b = c.letting_go(b, q_down, let_go)
-        let_go_b = c.fingers(PLACE, "opening", q_down, b.arm, let_b, let_go)
-        q_let_b = hand.set(q_down, b.arm, let_b)
-        retreat_b = next(options(PLACE, "retreat", itertools.chain(*retreats(arms, q_let_b, b.arm, None, True, PLACE, "retreat")),
-                                 leave(let_go, static_f, PLACE, b.arm)))
+        downs, first_down = self.set_downs(PLACE, q_down, b.arm, g_b, of)
+        let_b, released_b = self.release(PLACE, q_down, b, of)
 
         # Rest: to the final configuration, then both hands open
-        q_end = hand.set(scene.q_final if direct else hand.set(scene.q_final, a.arm, let_a), b.arm, let_b)
-        c.ready(q_end, static_f, REST, "final configuration")
-        opening = [] if np.allclose(q_end, scene.q_final) else [
-            c.contact(REST, "hands open", np.stack([q_end, scene.q_final]), static_f, None)]
+        q_end, opening = self.rest({b.arm: let_b} if direct else {a.arm: let_a, b.arm: let_b}, of)
 
         # the transits: independent of each other now that every contact motion is made; run longest first as measured
         # (Carry's, Place's, Rest's, Grasp's, the arm away), so the last to finish is a short one
         to_grasp: Job = (GRASP, lambda s: s.reach(scene.q_initial, grasps, first_grasp, static_i))
-        to_rest: Job = (REST, lambda s: [s.transit(retreat_b[-1].path[-1], q_end, static_f)])
+        to_rest: Job = (REST, lambda s: [s.transit(released_b[-1].path[-1], q_end, static_f)])
         if direct:  # carried by the one hand from the lift to above the placement
             carry, rest, to_grasp = self.transits([(CARRY, lambda s: s.reach(q_lifted, downs, first_down, held_a)), to_rest,
                                                    to_grasp])
             raise_first([to_grasp, carry, rest])
-            return to_grasp + lifted + carry + let_go_b + retreat_b + rest + opening
+            return to_grasp + lifted + carry + released_b + rest + opening
         # the picking arm alone away from the object, then the Place transit from where it went: both at once, the second
         # assuming the first reaches its first target; when it does not, the other targets are tried after them
         q_retreat = retreat_a[-1].path[-1]
@@ -205,4 +239,4 @@ class DoubleGraspPlanner:
             away = place.away(q_retreat, a.arm, targets[1:], held_b)
             to_place = place.reach((away or retreat_a)[-1].path[-1], downs, first_down, held_b)
         raise_first([to_place, rest])
-        return to_grasp + lifted + carry + let_go_a + retreat_a + away + to_place + let_go_b + retreat_b + rest + opening
+        return to_grasp + lifted + carry + let_go_a + retreat_a + away + to_place + released_b + rest + opening

@@ -9,8 +9,10 @@ from planner.core.bounds import bounded, described
 from planner.core.results import array
 from planner.motion.phase import Phase
 
-PHASES = tuple(phase.title for phase in Phase)  # Table I's rows, in the order of the stored phase integers
+PHASES = tuple(phase.title for phase in Phase)[:4]  # a handover's Table I rows (the paper's), in the order of the stored integers
+TABLE_PHASES = tuple(phase.title for phase in Phase)  # a table handover's: those and Set down, Regrasp
 PLANNERS = ("roadmap", "rrt")
+STRATEGIES = {"auto": ("handover", "table"), "handover": ("handover",), "table": ("table",)}  # strategy -> those tried, in order
 PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "contact")  # the step's stage seconds per phase,
 # in this order, then one for timing and sampling
 
@@ -49,11 +51,22 @@ class MotionParams:
     contact_env_clearance: float = bounded(0.004, 0.0, 0.05, "m", "... and this far between checks")
     contact_penetration: float = bounded(0.001, 1e-5, 0.01, "m", "hand-object pairs touch at most this deep between checks (0 at them)")
     contact_coarse: int = bounded(3, 1, 100, "(factor)", "contact checks at every k-th configuration with k-times margins first (1: dense)")
+    strategy: str = described("auto", "handover: a double grasp; table: set down for the other hand; auto: handover, else table",
+                              tuple(STRATEGIES))
+    table_placements: int = bounded(6, 1, 1000, "placements", "table: intermediate placements both arms reach tried, best first")
+    table_candidates: int = bounded(16, 1, 1000, "motions", "table: (placement, pick grasp, place grasp) motions tried in all")
+    placement_spacing: float = bounded(0.1, 0.01, 1.0, "m", "table: grid spacing of the positions on each support")
+    placement_headings: int = bounded(4, 1, 64, "headings", "table: headings per position and resting pose")
+    placement_min_probability: float = bounded(0.05, 0.0, 1.0, "(probability)", "table: resting poses less likely are left out")
+    placement_seeds: int = bounded(8, 1, 1000, "IK starts", "table: IK starts per arm and position, to find which arm reaches it")
+    placement_tolerance: float = bounded(0.02, 0.001, 0.2, "m", "table: reach brings the fingertip centre this near the centre of mass")
 
     def problem(self) -> str:
         """What is wrong with the values, naming the parameter ('' when nothing): checked before the step runs."""
         if self.planner not in PLANNERS:
             return f"planner must be one of {', '.join(PLANNERS)}, got '{self.planner}'"
+        if self.strategy not in STRATEGIES:
+            return f"strategy must be one of {', '.join(STRATEGIES)}, got '{self.strategy}'"
         if self.contact_env_clearance >= self.contact_env_padding:
             return (f"contact_env_clearance must be below contact_env_padding ({self.contact_env_padding:g} m): a padding is checked "
                     f"so that the clearance holds between checks, got {self.contact_env_clearance:g} m")
@@ -62,11 +75,12 @@ class MotionParams:
 
 @dataclass(frozen=True)
 class Motion:
-    """A trajectory sampled at `rate`: time, configuration, phase (0..3: Grasp, Carry, Place, Rest), the object's world
+    """A trajectory sampled at `rate`: time, configuration, phase (an index into `phase_names`), the object's world
     pose, which arm holds it (-1: none) and which arm's hand works at the object (-1: none), each wrist's position, and
 the names of q's columns;
     `keyframes` are the samples at q_initial, q_grasp, q_exch, q_place and q_final (a direct transfer, one arm carrying
-    the object, has no exchange: Carry takes it to above the placement, and its q_exch keyframe is q_place's). `phases`
+    the object, has no exchange: Carry takes it to above the placement, and its q_exch keyframe is q_place's; in a table
+    handover q_exch is where the placing hand has closed on the object at the intermediate placement). `phases`
     holds Table I's counts per phase (seconds are in the session record)."""
 
     planner: str
@@ -87,13 +101,21 @@ the names of q's columns;
     wrists: np.ndarray = array("float64", ("n", 2, 3))
     keyframes: np.ndarray = array("int64", (5,))
     joint_names: tuple = ()  # the robot's joints in q's column order (absent from sessions older than it: see joint_names_of)
+    phase_names: tuple = PHASES  # what `phase` and the rows of `phases` index (a table handover's are TABLE_PHASES)
+    strategy: str = "handover"  # the one that moved: 'handover' (a double grasp, or a direct transfer) or 'table'
+    alternatives: tuple = ()  # the strategies tried before it (all of them when none worked): {"strategy", "failure"}
+    intermediate: tuple = ()  # a table handover's intermediate placement: the object's pose, 4 rows of 4 (empty: none)
 
     @property
     def duration(self) -> float:
         return float(self.t[-1]) if len(self.t) else 0.0
 
+    def phase_name(self, phase: int) -> str:
+        """The name of a stored phase integer ('phase 7' for one a session names no phase for: sessions are untrusted)."""
+        return str(self.phase_names[phase]) if 0 <= phase < len(self.phase_names) else f"phase {phase}"
+
     def stats(self) -> dict:
-        return {"planner": self.planner, "double_grasp": self.double_grasp, "samples": int(len(self.t)),
+        return {"planner": self.planner, "strategy": self.strategy, "double_grasp": self.double_grasp, "samples": int(len(self.t)),
                 "duration": round(self.duration, 3),
                 "path_length": round(sum(p["path_length"] for p in self.phases), 3) if self.phases else 0.0,
                 **({"failure": self.failure} if self.failure else {})}

@@ -20,7 +20,7 @@ from planner.core.errors import InputError, RegraspError
 from planner.core.results import atomic_write_text
 from planner.core.session import Session
 from planner.model.robot import Robot
-from planner.motion.result import PHASES, Motion
+from planner.motion.result import Motion
 
 FORMATS = (".json", ".csv")
 FRAME = "world"  # the frame of the object's pose and of the robot's base (the task's world frame)
@@ -74,7 +74,7 @@ def trajectory_of(session: Session) -> TrajectoryPoints:
     holders = tuple(arms[h] if 0 <= h < len(arms) else "" for h in motion.holder.tolist())
     keys = {name: int(i) for name, i in zip(KEYFRAMES, motion.keyframes.tolist())}
     return TrajectoryPoints(names, motion.t, motion.q, finite_difference_velocities(motion.t, motion.q),
-                      tuple(PHASES[p] for p in motion.phase.tolist()), holders, motion.object_pose[:, :3, 3],
+                      tuple(motion.phase_name(p) for p in motion.phase.tolist()), holders, motion.object_pose[:, :3, 3],
                       Rotation.from_matrix(motion.object_pose[:, :3, :3]).as_quat(), keys)
 
 

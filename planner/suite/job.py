@@ -79,11 +79,12 @@ class TaskOutcome:
     double_grasps: int | None
     motion_duration: float | None  # s, the timed trajectory
     path_length: float | None  # rad, summed over the joints
+    strategy: str = ""  # the motion's ('handover', 'table'); empty when it did not move (suites written before it too)
 
     def to_json(self) -> dict[str, Any]:
         return {"id": self.id, "success": self.success, "failed_step": self.failed_step, "failed_stage": self.failed_stage,
                 "message": self.message, "steps": list(self.steps), "double_grasps": self.double_grasps,
-                "motion_duration": self.motion_duration, "path_length": self.path_length}
+                "motion_duration": self.motion_duration, "path_length": self.path_length, "strategy": self.strategy}
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,8 @@ def _outcome(job: TaskJob, session: Session | None, failure: tuple[str, str] | N
     stage = TIMEOUT if timed_out else _failed_stage(session, step) if session and step in records else ""
     motion = records.get("motion", {}) if step != "motion" else {}  # a failed motion has no duration nor length
     return TaskOutcome(job.id, failure is None, step, stage, message, tuple(records),
-                       records.get("double_grasps", {}).get("double_grasps"), motion.get("duration"), motion.get("path_length"))
+                       records.get("double_grasps", {}).get("double_grasps"), motion.get("duration"), motion.get("path_length"),
+                       str(motion.get("strategy", "")))
 
 
 def run_job(job: TaskJob) -> JobResult:

@@ -77,7 +77,9 @@ def _prepare(folder: Path, spec: SuiteSpec, until: str | None, resume: bool, for
 
 NUMBER_OR_NONE = (int, float, type(None))
 OUTCOME_TYPES = {"id": str, "success": bool, "failed_step": str, "failed_stage": str, "message": str, "steps": list,
-                 "double_grasps": (int, type(None)), "motion_duration": NUMBER_OR_NONE, "path_length": NUMBER_OR_NONE}
+                 "double_grasps": (int, type(None)), "motion_duration": NUMBER_OR_NONE, "path_length": NUMBER_OR_NONE,
+                 "strategy": str}
+OPTIONAL = {"strategy"}  # outcome fields added later: a record written before them has none
 
 
 def _refuse_links(folder: Path) -> None:
@@ -97,7 +99,7 @@ def _finished(folder: Path, task: GeneratedTask) -> TaskRecord | None:
         return None
     data = read_json_object(path)
     outcome = typed(data.get("outcome"), dict, path, "outcome", "the task's outcome as an object")
-    for key in sorted(set(outcome) | set(OUTCOME_TYPES)):
+    for key in sorted(set(outcome) | (set(OUTCOME_TYPES) - OPTIONAL)):
         if key not in OUTCOME_TYPES or key not in outcome:
             raise InputError(path, f"outcome.{key}", "missing field" if key in OUTCOME_TYPES else "unknown field")
         kinds = OUTCOME_TYPES[key] if isinstance(OUTCOME_TYPES[key], tuple) else (OUTCOME_TYPES[key],)

@@ -1,4 +1,5 @@
-"""A suite's totals: success rate, failures by step and stage, per-step seconds, per object and region; JSON and CSV.
+"""A suite's totals: success rate, failures by step and stage, successes by the motion's strategy, per-step seconds, per
+object and region; JSON and CSV.
 
 `results` (per task, in task order) depend only on the suite and its seeds; measured times are kept apart
 (`timings`, `seconds`, and `wall_seconds`: the last run's, from its start to its end, a resumed suite's from its resume)."""
@@ -69,6 +70,7 @@ def summary(name: str, until: str | None, total: int, records: list[TaskRecord],
         "succeeded": succeeded,
         "success_rate": round(succeeded / len(records), 4) if records else 0.0,
         "by_stage": dict(sorted(failures.items(), key=lambda kv: (-kv[1], kv[0]))),
+        "by_strategy": dict(sorted(Counter(r.outcome.strategy for r in records if r.outcome.success and r.outcome.strategy).items())),
         "by_object": _rates(records, "object"),
         "by_initial_region": _rates(records, "initial_region"),
         "by_final_region": _rates(records, "final_region"),

@@ -18,7 +18,7 @@ import viser
 from planner.core.plain_text import plain
 from planner.core.session import Session
 from planner.model.task import Scene
-from planner.motion.result import PHASE_SECONDS, PHASES, Motion
+from planner.motion.result import PHASE_SECONDS, Motion
 from planner.motion.trajectory_file import trajectory_of, trajectory_text
 
 from ..meshes import matrix_wxyz
@@ -29,8 +29,9 @@ from .stages import FAILURE_COLOR
 
 TIMELINE = "motion: the timeline's sample"  # what "Robot at" says when the timeline posed the robot
 
-PHASE_COLORS = ((0, 170, 170), (90, 60, 220), (200, 50, 200), (110, 110, 110))  # Grasp, Carry, Place, Rest
-PHASE_COLOR_NAMES = ("teal", "violet", "magenta", "grey")
+# Grasp, Carry, Place, Rest, then a table handover's Set down and Regrasp (planner/motion/phase.py)
+PHASE_COLORS = ((0, 170, 170), (90, 60, 220), (200, 50, 200), (110, 110, 110), (230, 140, 20), (40, 160, 60))
+PHASE_COLOR_NAMES = ("teal", "violet", "magenta", "grey", "orange", "green")
 ROUTE_THICKNESS = 0.004  # m
 FPS = 30.0  # frames a second at most while playing (samples are skipped when the trajectory's rate or the speed is higher)
 SPEEDS = (0.1, 4.0)  # playback speed range (1 = real time)
@@ -45,7 +46,7 @@ def route_segments(result: Motion) -> tuple[np.ndarray, np.ndarray]:
     if len(w) < 2:
         return np.zeros((0, 2, 3), np.float32), np.zeros((0, 2, 3), np.uint8)
     points = np.stack([w[:-1], w[1:]], axis=2)  # (n-1, wrists, 2 ends, 3)
-    colors = np.asarray(PHASE_COLORS, np.uint8)[result.phase[1:].astype(int)]  # (n-1, 3)
+    colors = np.asarray(PHASE_COLORS, np.uint8)[np.clip(result.phase[1:].astype(int), 0, len(PHASE_COLORS) - 1)]  # (n-1, 3)
     colors = np.broadcast_to(colors[:, None, None, :], points.shape)
     return points.reshape(-1, 2, 3).astype(np.float32), np.ascontiguousarray(colors.reshape(-1, 2, 3))
 
@@ -130,11 +131,16 @@ class MotionLayer(StepLayer):
 
     def summary(self, result: Motion) -> str:
         """Which double grasp moved, the routes' colours, Table I and the failure (red)."""
-        used = (f"Double grasp **{result.double_grasp + 1}** of {len(result.tried)} tried" if result.double_grasp >= 0
-                else f"No double grasp worked ({len(result.tried)} tried)")
+        if result.strategy == "table" and len(result.t):
+            used = f"Table handover: candidate **{len(result.tried)}**, through an intermediate placement"
+        else:
+            used = (f"Double grasp **{result.double_grasp + 1}** of {len(result.tried)} tried" if result.double_grasp >= 0
+                    else f"No double grasp worked ({len(result.tried)} tried)")
+        used += "".join(f"; the {plain(str(a.get('strategy', '?')))} strategy failed: {plain(str(a.get('failure', '')))}"
+                        for a in result.alternatives if isinstance(a, dict))
         failed = [f"{k + 1}: {plain(why)}" for k, why in enumerate(result.tried) if why]
         text = (f"{used}; planner *{plain(result.planner)}*, {len(result.t)} samples, {result.duration:.2f} s.\n\n"
-                f"Wrist routes: " + ", ".join(f"{p} {c}" for p, c in zip(PHASES, PHASE_COLOR_NAMES)) + ".\n\n")
+                f"Wrist routes: " + ", ".join(f"{plain(str(p))} {c}" for p, c in zip(result.phase_names, PHASE_COLOR_NAMES)) + ".\n\n")
         if result.phases:
             text += table_one(result, self._seconds())
         if failed and not result.failure:
@@ -213,7 +219,7 @@ class MotionLayer(StepLayer):
         assert r is not None
         holder = int(r.holder[i])
         held = f"held by the {plain(r.arms[holder])} hand" if holder >= 0 else "object static"
-        return f"**{PHASES[int(r.phase[i])]}** — t = {r.t[i]:.2f} s of {r.duration:.2f} s, sample {i}; {held}"
+        return f"**{plain(r.phase_name(int(r.phase[i])))}** — t = {r.t[i]:.2f} s of {r.duration:.2f} s, sample {i}; {held}"
 
     # -- playback --------------------------------------------------------------------------------
 

@@ -1,0 +1,162 @@
+"""Stable placements of the object on the scene's supports: where a hand may set it down for the other to take it.
+
+The object's resting poses (those of the task's placements, where it rests and the grasps were chosen for, then
+trimesh's `compute_stable_poses`: the convex hull's faces the centre of mass projects into, with the probability of
+landing on each) are put on every support (the top face of an upright box
+obstacle: the desk top, a shelf) on a grid of positions, at several headings. A placement is kept when the object
+there is clear of every other obstacle and of the robot's fixed base; each arm's reach of its centre of mass is
+recorded (reach.py: the fingertip centre brought there by the arm and the torso, collision-free). The stages say how
+many were dropped and why. Ordered for the table handover: both arms reaching first, then by the distance the object
+travels from its initial placement through it to its final one, then the more probable resting pose first.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.collision.checker import build_collision_model
+from planner.collision.hand_placement import ObstacleTest
+from planner.collision.object_obstacle import ObjectCollision
+from planner.collision.shapes import coal_mesh
+from planner.core.results import array
+from planner.core.stages import StageLog
+from planner.core.steps import Progress, no_progress
+from planner.handover.reach import reach
+from planner.model.environment import Obstacle
+from planner.model.task import Scene
+
+UPRIGHT = 0.999  # a box whose z axis is this near the world's vertical has a horizontal top face
+LIFTED = 0.001  # m: the object is checked this far above its support (resting on it, it touches)
+
+
+@dataclass(frozen=True)
+class PlacementParams:
+    """How the placements are searched (the motion step's parameters carry them)."""
+
+    spacing: float  # m between grid positions on a support
+    headings: int  # headings per position and resting pose
+    min_probability: float  # resting poses less likely are left out
+    seeds: int  # IK starts per arm and position for reach
+    tolerance: float  # m: the fingertip centre to the centre of mass, at most
+
+
+@dataclass(frozen=True)
+class Placements:
+    """Stable placements of the object, best first for a table handover, with the supports and each arm's reach."""
+
+    arms: list  # arm names: the columns of `reached`
+    support: list  # per placement, the obstacle it rests on
+    stages: list  # what each stage kept (and so what it dropped)
+    pose: np.ndarray = array("float64", ("n", 4, 4))
+    probability: np.ndarray = array("float64", ("n",))  # of the resting pose
+    reached: np.ndarray = array("bool", ("n", None))
+
+    def __len__(self) -> int:
+        return len(self.probability)
+
+
+def resting_poses(scene: Scene, min_probability: float) -> tuple[list[np.ndarray], list[float]]:
+    """The object's resting poses (object frame to a frame whose origin is under the centre of mass, on the support's
+    plane z = 0): first those of the task's initial and final placements (the object rests there, and the hands' grasps
+    were chosen for them), then trimesh's stable poses at least `min_probability` likely, most likely first, each
+    resting on a face no earlier one rests on. A task's pose takes the probability of trimesh's pose on the same face
+    (0 when it has none)."""
+    mesh = scene.object_mesh
+    transforms, probabilities = mesh.compute_stable_poses(center_mass=mesh.center_mass)
+    stable = sorted(zip(transforms, probabilities), key=lambda tp: -tp[1])
+    out, kept = [], []
+    for T, p in [(T, None) for T in (scene.object_initial, scene.object_final)] + stable:
+        if (p is not None and p < min_probability) or any(np.dot(down(T), down(U)) > UPRIGHT for U in out):
+            continue
+        if p is None:
+            p = next((q for U, q in stable if np.dot(down(T), down(U)) > UPRIGHT), 0.0)
+        T = np.array(T, float)
+        com = T[:3, :3] @ mesh.center_mass + T[:3, 3]
+        low = float((mesh.vertices @ T[:3, :3].T + T[:3, 3])[:, 2].min())
+        T[:3, 3] -= [com[0], com[1], low]
+        out.append(T)
+        kept.append(float(p))
+    return out, kept
+
+
+def down(T: np.ndarray) -> np.ndarray:
+    """The direction, in the object's frame, towards the support it rests on at pose T."""
+    return T[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+
+
+def support_grid(support: Obstacle, margin: float, spacing: float) -> np.ndarray:
+    """(k, 3) positions on the top face of an upright box obstacle, at least `margin` inside its edges; empty for any
+    other obstacle."""
+    R = support.pose[:3, :3]
+    if support.shape != "box" or abs(R[2, 2]) < UPRIGHT:
+        return np.zeros((0, 3))
+    half = np.asarray(support.size[:2], float) / 2 - margin
+    if np.any(half < 0):
+        return np.zeros((0, 3))
+    axes = [np.arange(-h, h + 1e-9, spacing) if h >= spacing else np.zeros(1) for h in half]
+    axes = [a - (a[-1] + a[0]) / 2 for a in axes]  # centred on the face
+    xy = np.array([(x, y) for x in axes[0] for y in axes[1]])
+    top = support.pose[2, 3] + support.size[2] / 2
+    world = (R[:2, :2] @ xy.T).T + support.pose[:2, 3]
+    return np.column_stack([world, np.full(len(world), top)])
+
+
+def yaw(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    return T
+
+
+def stable_placements(scene: Scene, p: PlacementParams, progress: Progress = no_progress) -> tuple[Placements, list[float]]:
+    """Every stable placement of the object on the scene's supports (see the module), best first, and the seconds of
+    each stage."""
+    log = StageLog()
+    rests, probabilities = resting_poses(scene, p.min_probability)
+    log.done("resting poses", len(rests), f"the task's, then others at least {p.min_probability:g} likely")
+    mesh = scene.object_mesh
+    com = np.asarray(mesh.center_mass, float)
+    margin = float(np.linalg.norm((mesh.vertices - com)[:, :2], axis=1).max())
+    env = scene.environment
+    grids = {ob.name: support_grid(ob, margin, p.spacing) for ob in env}
+    positions = [(name, x) for name, grid in grids.items() for x in grid]
+    log.done("positions on supports", len(positions), f"{sum(1 for g in grids.values() if len(g))} supports, "
+             f"{p.spacing:g} m apart, {margin:.3f} m inside the edges")
+    candidates = [(name, x, k, h) for name, x in positions for k in range(len(rests)) for h in range(p.headings)]
+    log.done("candidate placements", len(candidates), f"x {len(rests)} resting poses x {p.headings} headings")
+    shape = coal_mesh(mesh)
+    collision = ObjectCollision(scene)
+    tests = {name: ObstacleTest([(ob.coal_shape(), ob.pose) for ob in env if ob.name != name] + collision.fixed_base,
+                                collision.static.margin) for name, grid in grids.items() if len(grid)}
+    clear = []
+    for name, x, k, h in candidates:
+        T = yaw(2 * np.pi * h / p.headings) @ rests[k]
+        T[:3, 3] += x + [0.0, 0.0, LIFTED]
+        if not tests[name].hits([(shape, T)]):
+            T[2, 3] -= LIFTED
+            clear.append((name, T, probabilities[k]))
+    log.done("clear of obstacles", len(clear), "the object clear of every other obstacle and of the robot's base")
+    robot = scene.robot
+    checker = build_collision_model(robot, env).checker()
+    arms = list(robot.spec.arm_names)
+    reached: dict[tuple, list[bool]] = {}
+    flags = []
+    for i, (_, T, _) in enumerate(clear):
+        target = T[:3, :3] @ com + T[:3, 3]
+        key = tuple(np.round(target, 2))
+        if key not in reached:
+            progress(i / max(len(clear), 1), f"reach of placement {i + 1} of {len(clear)}")
+            reached[key] = [reach(robot, checker, a, target, np.random.default_rng([len(reached), j]), p.seeds, p.tolerance).reachable
+                            for j, a in enumerate(arms)]
+        flags.append(reached[key])
+    flags_arr = np.array(flags, bool).reshape(-1, len(arms))
+    log.done("reached by an arm", int(flags_arr.any(axis=1).sum()), f"{len(reached)} positions tried, {p.seeds} IK starts per arm")
+    log.done("reached by both arms", int(flags_arr.all(axis=1).sum()), "where one hand can set it down for the other")
+    ends = [scene.object_initial[:3, :3] @ com + scene.object_initial[:3, 3], scene.object_final[:3, :3] @ com + scene.object_final[:3, 3]]
+    travel = [sum(np.linalg.norm(T[:3, :3] @ com + T[:3, 3] - e) for e in ends) for _, T, _ in clear]
+    order = sorted(range(len(clear)), key=lambda i: (-int(flags_arr[i].all()), round(travel[i], 6), -clear[i][2], i))
+    return Placements(arms, [clear[i][0] for i in order], log.stages,
+                      np.array([clear[i][1] for i in order]).reshape(-1, 4, 4), np.array([clear[i][2] for i in order]),
+                      flags_arr[order].reshape(-1, len(arms))), log.seconds
+
