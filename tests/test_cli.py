@@ -49,6 +49,7 @@ def test_check_bad_task_is_a_clear_error(tmp_path):
     assert str(bad) in run.stderr and "object.initial" in run.stderr and "expected 3 numbers" in run.stderr
 
 
+@pytest.mark.slow
 def test_check_reports_a_task_that_needs_no_regrasp(tmp_path):
     from planner.core.paths import ASSETS
 
@@ -232,6 +233,7 @@ def test_bars_print_plain_lines_off_a_terminal():
     assert lines[0] == "roadmap:   0% node 0" and lines[-1] == "roadmap: 100% node 100"
 
 
+@pytest.mark.slow
 def test_plan_progress_in_a_log_is_plain_lines(tmp_path):
     run = regrasp("plan", "default", "--out", str(tmp_path / "s"), "--until", "arms")
     assert run.returncode == 0, run.stderr

@@ -213,6 +213,7 @@ def test_default_lists_have_50_force_closed_grasps(tmp_path, hand):
     assert data["outcomes"]["closed"] >= 50 and len(data["grasps"]) >= 50  # time: see `regrasp grasps`, not a test
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("min_clear, densified", [(10_000, True), (0, False)])
 def test_few_grasps_clear_of_the_support_make_the_step_search_denser(tmp_path, min_clear, densified):
     """The place step counts its list's grasps clear of the obstacles at the final placement and, with fewer than

@@ -93,6 +93,7 @@ def _refused(result: dict, folder: Path, cause: str) -> str:
     return line
 
 
+@pytest.mark.slow
 def test_out_folder_without_write_permission(tmp_path: Path) -> None:
     probe = tmp_path / "probe"
     probe.mkdir(mode=0o555)

@@ -281,6 +281,7 @@ def test_coarse_first_never_passes_a_segment_that_comes_nearer_than_the_clearanc
 
 
 
+@pytest.mark.slow
 def test_two_level_never_passes_a_segment_that_comes_nearer_than_the_clearance():
     """Analytic, two grids in any ratio (a transit end held close: n checks at the transit paddings, m > n at the
     paddings fitted to it). Clearance c = 0, fine padding p = 1: between two of the m configurations a pair's distance

@@ -71,6 +71,7 @@ BOMBS = {  # file, how it is built, the field named, the limit named
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(BOMBS))
 def test_a_bomb_is_one_line_naming_file_field_and_limit_within_2_gb(session: Path, tmp_path: Path, case: str) -> None:
     name, build, field, limit = BOMBS[case]

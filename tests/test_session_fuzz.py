@@ -168,6 +168,7 @@ def _mutations(base: dict, names: list[str]) -> list[tuple[str, dict]]:
     return out
 
 
+@pytest.mark.slow
 def test_fuzzed_manifests_load_or_raise_input_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     cache = tmp_path / "cache"
     monkeypatch.setenv("REGRASP_CACHE", str(cache))

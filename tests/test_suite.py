@@ -261,6 +261,7 @@ def test_the_report_opens_in_chromium_and_shows_its_plots(local_run, suite_file,
         page.close()
 
 
+@pytest.mark.slow
 def test_a_cold_suite_in_a_log_says_each_task_and_each_cache_entry_it_builds(tmp_path):
     """Its stderr a file, with an empty cache: a line per cache entry as it is built and when it is stored, and one per
     finished task (a cold run used to say nothing between "generating" and the end)."""

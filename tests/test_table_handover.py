@@ -44,6 +44,7 @@ def cube_scene(tmp_path_factory):
     return load_task(cube_task(tmp_path_factory.mktemp("cube")))
 
 
+@pytest.mark.slow
 def test_placements_rest_on_a_support_clear_of_every_other_obstacle(cube_scene):
     scene = cube_scene
     placements, seconds = stable_placements(scene, PlacementParams(0.2, 2, 0.05, 2, 0.02))

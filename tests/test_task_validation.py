@@ -233,6 +233,7 @@ def test_plan_refuses_a_placement_inside_an_obstacle_with_checks_message(tmp_pat
     assert session.finished() == []
 
 
+@pytest.mark.slow
 def test_check_says_what_the_reach_distance_is():
     run = subprocess.run([sys.executable, "-m", "workbench.cli", "check", "default"], check=False, capture_output=True, text=True,
                          timeout=300)
@@ -317,6 +318,7 @@ def test_geometric_median_minimises_the_distance_sum():
 
 # --- shared seeds and caches ---------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_grasps_and_plan_share_a_cached_list(tmp_path, monkeypatch):
     assert PICK_STEP.seed(7) == PLACE_STEP.seed(7) and session_grasp_seed(7) != session_grasp_seed(8)
     listing = tmp_path / "list.json"

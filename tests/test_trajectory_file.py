@@ -18,6 +18,8 @@ from planner.core.results import load_result, save_result
 from planner.core.session import Session
 from planner.motion.result import PHASES, Motion
 
+pytestmark = pytest.mark.slow  # each test runs `regrasp export` in a subprocess from a fresh folder
+
 
 def export(cwd: Path, *args: str) -> subprocess.CompletedProcess:
     """`regrasp export` run from `cwd` (a fresh folder) with an empty cache in it."""

@@ -55,6 +55,7 @@ def test_switching_the_task_keeps_the_steps_run(bench: Workbench, sessions: Path
     assert "default-unsaved-1" in panel.saved.options
 
 
+@pytest.mark.slow
 def test_loading_a_session_or_closing_keeps_them_too(bench: Workbench, sessions: Path) -> None:
     _run_arms(bench)
     assert bench.session_panel.load(sessions / "good")

@@ -43,6 +43,7 @@ def _edit(folder: Path, change: Callable[[dict[str, Any]], None]) -> None:
 # -- mesh keys: one key, one lookup, no file ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_session_of_a_scaled_mesh_reopens(tmp_path: Path) -> None:
     """A task whose mesh is in millimetres (scale = 0.001): its session opens, with the mesh it embedded."""
     mesh = trimesh.load(ASSETS / "objects" / "statuette.obj", process=False)

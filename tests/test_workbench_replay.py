@@ -91,6 +91,7 @@ def _show_everything(wb: Workbench) -> int:
     return shown
 
 
+@pytest.mark.slow
 def test_replaying_the_example_recomputes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     folder = tmp_path / "example"
     shutil.copytree(EXAMPLE, folder)
