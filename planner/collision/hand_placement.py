@@ -36,17 +36,12 @@ class ObjectTest:
         self.identity = coal.Transform3s()
         self.request = coal.CollisionRequest()
 
-    @staticmethod
-    def posed(geometry: coal.CollisionGeometry, pose: np.ndarray) -> tuple[coal.CollisionGeometry, coal.Transform3s]:
-        """A shape at a pose, as `hits_placed` takes it and the shapes placed before (the transform made once)."""
-        return geometry, transform3s(pose)
-
-    def hits_object(self, geometry: coal.CollisionGeometry, pose: np.ndarray) -> bool:
-        result = coal.CollisionResult()
-        return bool(coal.collide(geometry, transform3s(pose), self.object_geometry, self.identity, self.request, result))
+    def hits_object(self, geometry: coal.CollisionGeometry, tf: coal.Transform3s) -> bool:
+        """True if the shape at `tf` (see shapes.transform3s: made once, also for `hits_placed`) touches the object."""
+        return bool(coal.collide(geometry, tf, self.object_geometry, self.identity, self.request, coal.CollisionResult()))
 
     def hits_placed(self, shape: tuple[coal.CollisionGeometry, coal.Transform3s], placed: list) -> bool:
-        """True if the shape (see `posed`) touches one of the shapes placed before."""
+        """True if the shape (geometry, transform) touches one of the shapes placed before (each geometry, transform)."""
         geometry, tf = shape
         for other, other_tf in placed:
             result = coal.CollisionResult()

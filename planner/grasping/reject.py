@@ -13,8 +13,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from planner.collision.object_screens import bounding
+from planner.collision.shapes import transform3s
 from planner.grasping.candidates import Candidates
-from planner.grasping.screens import bounding
 
 if TYPE_CHECKING:
     from planner.grasping.search import GraspSearch
@@ -60,7 +61,7 @@ def body_hits(search: GraspSearch, H: np.ndarray) -> np.ndarray:
         world = (H @ shape.placement)[:, None]
         hit |= search.screen.hits(world, [search.body_inside[j]])
         for k in np.flatnonzero(~hit):
-            hit[k] = search.test.hits_object(shape.geometry, world[k, 0])
+            hit[k] = search.test.hits_object(shape.geometry, transform3s(world[k, 0]))
     return hit
 
 

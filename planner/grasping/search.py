@@ -11,7 +11,7 @@ sample; a solution counts when closing the finger pushes its tip into the surfac
 `press_angle` of the inward normal: a finger can only squeeze by closing). A frame takes its first
 candidate, in rank order, whose finger is collision-free with the object (the fingertip sphere
 shrunk by a clearance, since it touches) and with the fingers already placed: certain hits are
-screened out for all candidates at once (screens.py), coal's exact test decides the rest. A finger
+screened out for all candidates at once (planner/collision/object_screens.py), coal's exact test decides the rest. A finger
 without contact stays open and must be collision-free too. Grasps of >= 3 contacts go to the
 stability filter, where a separating hyperplane rules most out before the exact hull.
 """
@@ -19,18 +19,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import coal
 import numpy as np
 import trimesh
 
 from planner.collision.hand_placement import ObjectTest
-from planner.collision.shapes import sphere, transform3s
+from planner.collision.object_screens import SPHERE_MARGIN, ObjectScreen, Posed, bounding, inside_of
+from planner.collision.shapes import Geometry, sphere, transform3s
 from planner.grasping.candidates import CandidateFinder, Candidates
 from planner.grasping.finger_workspace import FingerWorkspace
 from planner.grasping.object_model import ObjectModel
 from planner.grasping.quality import com_score, contact_wrenches, curvature_score, ellipsoid_alignment, separated, wrench_closure
 from planner.grasping.reject import MIN_CONTACTS, REJECTIONS, rejected
-from planner.grasping.screens import SPHERE_MARGIN, ObjectScreen, Posed, bounding, inside_of
 from planner.model.hand_model import FingerChain, HandModel
 
 # Why a frame yields no grasp (or the grasp it yields), in the order the search meets them.
@@ -99,7 +98,7 @@ class GraspSearch:
         self.test_order = [sorted(range(len(f.shapes)), key=lambda j, f=f: (f.shapes[j].is_tip, -f.shapes[j].link)) for f in hand.fingers]
         self.bounds = [(np.array([c for c, _ in b]).reshape(-1, 3), np.array([r for _, r in b])) for b in spheres]
 
-    def _probe(self, fi: int, shape, touching: bool) -> coal.CollisionGeometry:
+    def _probe(self, fi: int, shape, touching: bool) -> Geometry:
         """What a finger shape is tested against the object as: a touching fingertip shrunk by the clearance."""
         return self.tip_spheres[fi] if (touching and shape.is_tip) else shape.geometry
 
@@ -111,8 +110,7 @@ class GraspSearch:
         transforms: list = [None] * len(shapes)
         for j in self.test_order[fi]:
             transforms[j] = transform3s(world[j])
-            if coal.collide(self._probe(fi, shapes[j], touching), transforms[j], test.object_geometry, test.identity, test.request,
-                            coal.CollisionResult()):
+            if test.hits_object(self._probe(fi, shapes[j], touching), transforms[j]):
                 return None
         centres = np.einsum("sij,sj->si", world[:, :3, :3], self.bounds[fi][0]) + world[:, :3, 3]
         radii = self.bounds[fi][1]
@@ -120,7 +118,7 @@ class GraspSearch:
             others, other_radii = np.array([o[2] for o in placed]), np.array([o[3] for o in placed])
             near = np.linalg.norm(centres[:, None] - others[None], axis=2) <= radii[:, None] + other_radii + SPHERE_MARGIN
             for j, o in zip(*np.nonzero(near)):
-                if coal.collide(shapes[j].geometry, transforms[j], placed[o][0], placed[o][1], test.request, coal.CollisionResult()):
+                if test.hits_placed((shapes[j].geometry, transforms[j]), [placed[o][:2]]):
                     return None
         return [(shape.geometry, tf, centre, float(r)) for shape, tf, centre, r in zip(shapes, transforms, centres, radii)]
 
