@@ -76,7 +76,7 @@ class Smoother:
         checks = self.validities.of(piece.situation, path[0], moving)
         if piece.part in TRANSIT_PARTS:
             return checks.transit_validities(path[0], path[-1])[1:]
-        return (checks.checked(self.validities.contact).validity,)
+        return (checks.validity(self.validities.contact),)
 
     def blend(self, pieces: list[Piece], strict: Situation, moving: np.ndarray) -> tuple[Validity, ...]:
         """The validity of ramps across pieces: the transit profile in their situation without exceptions (`strict`),
@@ -172,7 +172,7 @@ class _Run:
         shortcut = ramp(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
         if shortcut is None:
             return False
-        validities = self.validities(t1, t2, shortcut.speed_bounds()[1].max(axis=0) > 0)
+        validities = self.validities(t1, t2, np.any(shortcut.v != 0, axis=0) | np.any(shortcut.a != 0, axis=0))
         if validities is None:
             return False
         before = sum(v.checks for v in validities)
