@@ -274,13 +274,26 @@ class CollisionChecker:
         first = self._first
         hit = bool(pin.computeCollisions(manager, first) if placed else
                    pin.computeCollisions(self.model, self.data, manager, first, q))
-        if not hit or not screen.screening[first.collisionPairIndex]:
-            return hit
-        # a screening pair (the object's hull, which holds its mesh) is hit first: the subset's own pairs decide
-        self._last = None
-        self._subset(subset, margins, exact=True)
-        manager.update(False)  # the boxes are inflated by the margins of the active pairs
-        return bool(pin.computeCollisions(manager, True))
+        return hit and self._past_screens(gd, manager, screen)
+
+    def _past_screens(self, gd: pin.GeometryData, manager, screen: Screen) -> bool:
+        """After a hit: whether the subset's own pairs collide. A screening pair hit (the object's hull, which holds its
+        mesh) is answered by its twin, tested alone, and switched off while the broad phase looks on, until it finds
+        nothing or one of the subset's own pairs (no switching of the thousands of pair flags to the exact table)."""
+        first, off = self._first, []
+        try:
+            while screen.screening[first.collisionPairIndex]:
+                k = first.collisionPairIndex
+                if pin.computeCollision(self.cm.geometry, gd, int(self.cm.twins[k])):
+                    return True
+                gd.deactivateCollisionPair(k)
+                off.append(k)
+                if not pin.computeCollisions(manager, first):
+                    return False
+            return True
+        finally:
+            for k in off:
+                gd.activateCollisionPair(k)
 
     def colliding(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[int]:
         """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says
