@@ -188,17 +188,13 @@ class SegmentChecker:
     def _leading(self, subset: str, moving: np.ndarray) -> np.ndarray:
         """The subset's displacement weights over the moving joints without the rows another row bounds everywhere
         (speeds are >= 0: a bounded row never gives the largest displacement): a handful of a thousand, once per set of
-        joints."""
+        joints, picked among the rows no other bounds over all joints (bounded there, bounded over any of them)."""
         key = (subset, moving.tobytes())
         if key not in self._leading_rows:
-            rows = np.unique(self.weights(subset)[:, moving], axis=0)
-            rows = rows[np.argsort(-rows.sum(axis=1), kind="stable")]
-            kept, bounded = [], np.zeros(len(rows), dtype=bool)
-            for k in range(len(rows)):
-                if not bounded[k]:
-                    kept.append(k)
-                    bounded |= np.all(rows <= rows[k], axis=1)
-            self._leading_rows[key] = rows[kept]
+            every = (subset, b"")
+            if every not in self._leading_rows:
+                self._leading_rows[every] = _undominated(self.weights(subset))
+            self._leading_rows[key] = _undominated(np.unique(self._leading_rows[every][:, moving], axis=0))
         return self._leading_rows[key]
 
     def _grid(self, n: int) -> int:
@@ -219,6 +215,17 @@ class SegmentChecker:
             if self.in_collision(q, subset):
                 return q
         return None
+
+
+def _undominated(rows: np.ndarray) -> np.ndarray:
+    """The rows no other row bounds in every column (of equal rows, one)."""
+    rows = rows[np.argsort(-rows.sum(axis=1), kind="stable")]
+    kept, bounded = [], np.zeros(len(rows), dtype=bool)
+    for k in range(len(rows)):
+        if not bounded[k]:
+            kept.append(k)
+            bounded |= np.all(rows <= rows[k], axis=1)
+    return rows[kept]
 
 
 def coarse_first(n: int, k: int, hits: Callable[[float, bool], bool], ends: bool = True) -> float | None:
