@@ -21,7 +21,7 @@ import numpy as np
 from planner.collision.situation import Situation
 from planner.collision.validity import Validity
 from planner.motion.piece import TRANSIT_PARTS, Piece
-from planner.motion.ramps import ramp
+from planner.motion.ramps import TINY, min_times, ramp
 from planner.motion.trajectory import Trajectory, rest_to_rest
 from planner.motion.validities import Validities
 
@@ -122,10 +122,13 @@ class Smoother:
                 m = run.marks
                 if run.attempt(m[k] - part * (m[k] - m[k - 1]), m[k] + part * (m[k + 1] - m[k])):
                     break
-        for _ in range(attempts):
-            if run.checks >= budget:
-                break
-            run.attempt(*np.sort(rng.uniform(0.0, run.traj.duration, 2)))
+        draws = rng.random((attempts, 2))  # each random shortcut's two times, as shares of the run's duration then
+        k = run.hopeful(draws, 0)
+        while k is not None and run.checks < budget:
+            if run.attempt(*np.sort(draws[k] * run.traj.duration)):
+                k = run.hopeful(draws, k + 1)  # the trajectory changed: the later draws are judged on the new one
+            else:
+                k = run.hopeful(draws, k + 1, run.judged)
         return SmoothedRun(run.pieces, run.traj, run.ends, run.checks, run.shortcuts)
 
 
@@ -143,6 +146,7 @@ class _Run:
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.checks = self.shortcuts = 0
         self.marks = np.zeros(0)
+        self.judged = np.zeros(0, dtype=bool)  # the random pass's verdicts on the draws after the last one it attempted
 
     def validities(self, t1: float, t2: float, ramp_moves: np.ndarray) -> tuple[Validity, ...] | None:
         """What checks a ramp from t1 to t2: its piece's own validity, or the blend of the pieces it spans (also for one
@@ -161,6 +165,27 @@ class _Run:
             self.checks_of[key] = (self.smoother.own(self.pieces[i], moving) if own else
                                    self.smoother.blend(self.pieces[i: j + 1], self.strict, moving))
         return self.checks_of[key]
+
+    def hopeful(self, draws: np.ndarray, k: int, judged: np.ndarray | None = None) -> int | None:
+        """The first of the draws from k on (pairs of shares of the duration) whose ramp could save time on the
+        trajectory as it is: where the slowest joint's shortest move takes less than the span less the least gain, as
+        `attempt` asks first (judged a chunk at a time, all at once; `judged`: the verdicts of the draws from k on,
+        made on this trajectory before). None when no draw is left that could."""
+        p = self.smoother
+        chunk = 256
+        while k < len(draws):
+            if judged is None or not len(judged):
+                times = np.sort(draws[k: k + chunk] * self.traj.duration, axis=1)
+                (qa, va), (qb, vb) = (self.traj.states(times[:, i]) for i in (0, 1))
+                span = times[:, 1] - times[:, 0] - p.min_gain
+                fastest = min_times(qb - qa, va, vb, p.vmax, p.amax).max(axis=1, initial=0.0)
+                judged = (span > 0) & (fastest < span) & (fastest > TINY)
+            hits = np.flatnonzero(judged)
+            if len(hits):
+                self.judged = judged[hits[0] + 1:]
+                return k + int(hits[0])
+            k, judged = k + len(judged), None
+        return None
 
     def attempt(self, t1: float, t2: float) -> bool:
         """Whether the ramp from the state at t1 to the one at t2 is faster and valid; then it replaces that span, and
