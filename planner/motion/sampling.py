@@ -31,11 +31,11 @@ class Sampled:
 
 def sample(pieces: list[Piece], smoother: Smoother, rng: np.random.Generator, dt: float, attempts: int, budget: int) -> Sampled:
     """Every run smoothed, slowed to whole periods of dt and sampled (see the module). The runs share `attempts` random
-    shortcuts and a `budget` of collision checks in proportion to how long they take before smoothing."""
+    shortcuts and a `budget` of collision checks in proportion to what they could save (Smoother.could_save)."""
     out = Sampled()
     grouped = runs(pieces)
     seeds = rng.integers(2**63, size=len(grouped))
-    share = np.array([smoother.rest_to_rest(run) for run in grouped])
+    share = np.array([smoother.could_save(run) for run in grouped])
     share = share / max(share.sum(), 1e-12)
 
     def smooth(i: int):

@@ -69,6 +69,14 @@ class Smoother:
         """How long the pieces take timed rest to rest at every vertex (before smoothing)."""
         return sum(t.duration for t in (rest_to_rest(p.path, self.vmax, self.amax) for p in pieces) if t is not None)
 
+    def could_save(self, pieces: list[Piece]) -> float:
+        """How much smoothing could shorten the pieces: their time rest to rest at every vertex less the least any
+        motion between their ends takes (each joint from rest to rest over its own distance, at its limits); nothing
+        for one straight motion (a hand closing on the object)."""
+        zero = np.zeros(len(self.vmax))
+        least = min_times(pieces[-1].path[-1] - pieces[0].path[0], zero, zero, self.vmax, self.amax).max(initial=0.0)
+        return max(self.rest_to_rest(pieces) - float(least), 0.0)
+
     def own(self, piece: Piece, moving: np.ndarray) -> tuple[Validity, ...]:
         """The validity a piece was checked with (a transit's, its paddings fitted to its ends; a contact motion's),
         over the pairs the joints `moving` change."""
