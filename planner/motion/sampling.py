@@ -41,7 +41,9 @@ def sample(pieces: list[Piece], smoother: Smoother, rng: np.random.Generator, dt
     def smooth(i: int):
         return smoother.smooth(grouped[i], np.random.default_rng(seeds[i]), int(attempts * share[i]), int(budget * share[i]))
 
-    for smoothed in forked_map(smooth, range(len(grouped))):
+    order = np.argsort(-share, kind="stable")  # the longest work first: the last worker to finish ends the sooner
+    done = dict(zip(order.tolist(), forked_map(smooth, order.tolist())))
+    for smoothed in (done[i] for i in range(len(grouped))):
         if smoothed.trajectory is None:
             continue
         n = max(1, math.ceil(smoothed.trajectory.duration / dt - 1e-9))
