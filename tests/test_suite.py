@@ -27,7 +27,7 @@ from planner.model.task import find_task, load_task
 from planner.suite.generate import generate_tasks
 from planner.suite.report import write_report
 from planner.suite.spec import load_suite
-from planner.suite.toml_text import toml_text
+from planner.core.toml_text import toml_text
 from workbench.cli import main
 
 UNTIL = "place_grasps"

@@ -31,6 +31,7 @@ from .serving_port import start_server
 from .session_layers import SessionLayers
 from .session_panel import INITIAL, MOVED, OTHER, SessionPanel
 from .session_store import SESSIONS_DIR
+from .task_editor import TaskEditor
 from .view import CAMERA_LOOK_AT, CAMERA_POSITION, close_up, move_cameras, setup_view
 
 MAX_LISTED_PAIRS = 8
@@ -91,18 +92,20 @@ class Workbench:
         with self._lock:
             self._generation += 1
         self.session_panel.close()
+        self.task_editor.close()
         self.server.stop()
 
     def _build_gui(self, sessions_dir: Path) -> None:
         """The panel: task choice, view toggles, the session, joint sliders of one part, collision status."""
         gui = self.server.gui
-        with gui.add_folder("Task"):
+        with gui.add_folder("Task") as task_folder:
             self._task_files = task_choices(self.scene.source)
             self.task_choice = gui.add_dropdown("Task", tuple(self._task_files), initial_value=self._label_of(self.scene.source))
             self.task_path = gui.add_text("Task file", str(self.scene.source))
             self.load_button = gui.add_button("Load file")
             self.task_info = gui.add_markdown("")
             self.task_error = gui.add_markdown("", visible=False)
+        self.task_editor = TaskEditor(self, task_folder)
         with gui.add_folder("View"):
             self.show_robot = gui.add_checkbox("Show robot", True)
             self.show_collision = gui.add_checkbox("Show collision geometry", False)
@@ -156,8 +159,13 @@ class Workbench:
         except Exception as exc:  # a bad file must never take the workbench down
             self._refuse_task("Could not load the task", error_text(exc), client)
             return
-        self._show(scene)
-        self.session_panel.scratch = None  # the last task's unsaved steps kept (and said) now, not at the next run
+        self.show_task(scene)
+
+    def show_task(self, scene: Scene) -> None:
+        """Show another task (loaded, or edited in the Task tab): the steps shown were planned for the task before and go."""
+        with self._lock:
+            self._show(scene)
+            self.session_panel.scratch = None  # the last task's unsaved steps kept (and said) now, not at the next run
 
     def _refuse_task(self, title: str, message: str, client: viser.ClientHandle | None) -> None:
         """Say under the task (and to the asking tab) why the task shown stays."""
@@ -277,6 +285,7 @@ class Workbench:
             self._rebuild_sliders()
             self.collision_status.content = "*Collisions: building the collision model…*"
             self._draw_session(session)
+            self.task_editor.shown(scene)
             threading.Thread(target=self._build_collisions, args=(scene, self._generation), daemon=True).start()
 
     def _build_collisions(self, scene: Scene, generation: int) -> None:

@@ -27,7 +27,7 @@ from planner.model.geometry import pose
 from planner.model.object_mesh import MeshOptions, load_object_mesh
 from planner.model.task import BUILTIN_OBJECTS, Scene, load_task, scene_from_dict
 from planner.suite.spec import Region, SuiteObject, SuiteSpec
-from planner.suite.toml_text import toml_text
+from planner.core.toml_text import toml_text
 
 PLACEMENTS = ("initial", "final")
 
