@@ -18,11 +18,11 @@ from planner.model.task import MAX_COORDINATE, MAX_OBSTACLES, Scene
 
 TaskData = dict[str, Any]
 PLACEMENTS = ("initial", "final")
-MAX_STEP = 0.05  # m: a placement is put on the highest support at most this far above where it is held
+MAX_STEP = 0.1  # m: a placement is put on the highest support at most this far above where it is held (a small step up)
 DIGITS = 4  # decimals kept of a coordinate (0.1 mm) or an angle (0.1 mrad): a dragged pose is written readably
-
 NEW_SIZES = {"box": [0.1, 0.1, 0.1], "cylinder": [0.05, 0.1]}  # m: an added obstacle's size (box x y z; radius, length)
 NEW_COLOR = [140, 140, 150]
+
 
 def _round(values: Any) -> list[float]:
     """Numbers rounded to DIGITS decimals (-0.0 written as 0.0)."""
