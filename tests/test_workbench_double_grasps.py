@@ -95,12 +95,12 @@ def test_online_layers_are_drawn(workbench: Workbench, page: Page) -> None:
 def test_best_configurations_are_offered(workbench: Workbench) -> None:
     """The session panel's "Robot at" lists the best grasp / place configurations and pair 1's three configurations."""
     result = workbench.session.result("grasp_configs")
-    options = workbench.session_panel.robot_at.options
+    options = workbench.pose_choice.dropdown.options
     best = int(np.argmax(result.pick_score))
     label = f"grasp configs: best pick (rank {result.pick_rank[best] + 1})"
     assert label in options and any(o.startswith("grasp configs: best place") for o in options)
     assert sum(o.startswith("double grasps: pair 1") for o in options) == 3
-    workbench.session_panel.robot_at.value = label
+    workbench.pose_choice.dropdown.value = label
     try:
         assert np.allclose(workbench.q, result.pick_q[best])
     finally:

@@ -94,9 +94,8 @@ def test_robot_goes_to_a_witness_configuration(workbench: Workbench, page: Page,
     for layer in layers:  # the robot alone in view: the step layers' drawings (the motion's routes) cover parts of it
         layer.visible = False
     before = _settled(page)
-    panel = workbench.session_panel
-    label = next(o for o in panel.robot_at.options if "q_pick" in o)
-    panel.robot_at.value = label
+    label = next(o for o in workbench.pose_choice.dropdown.options if "q_pick" in o)
+    workbench.pose_choice.dropdown.value = label
     try:
         assert _wait_for(lambda: np.allclose(workbench.q, example.result("arms").q_pick))
         assert _until_changed(page, before) > CHANGED, "posing the robot at q_pick changed nothing on screen"

@@ -69,8 +69,8 @@ def screenshot(session: Path, out: Path, browser: Browser | None = None) -> int:
                 started.close()
     wb = Workbench(None, "127.0.0.1", free_port(), session=session)
     try:
-        if POSE in wb.session_panel.robot_at.options:
-            wb.session_panel.robot_at.value = POSE
+        if POSE in wb.pose_choice.dropdown.options:
+            wb.pose_choice.dropdown.value = POSE
         page = browser.new_page(viewport=VIEWPORT)
         try:
             page.goto(wb.url)

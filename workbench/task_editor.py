@@ -70,6 +70,7 @@ class TaskEditor:
         self._source = Path()
         self._robot_path: Path | None = None
         self._applying: Scene | None = None  # the edited scene being handed to the workbench
+        self._asking: viser.ClientHandle | None = None  # the tab asked about unsaved steps an edit would drop, until it answers
         self.edited = False
         self.handles = TaskHandles(workbench.server, self._handle_moved)
         self.live = LiveCheck(self._apply, self._show_check)
@@ -165,26 +166,42 @@ class TaskEditor:
 
     def _edit(self, change: Callable[[TaskData], TaskData], client: viser.ClientHandle | None,
               robot_path: Path | None = None) -> bool:
-        """Apply `change` to the task data: the new scene is built now (a failure is said and the controls go back), shown
-        by the workbench and checked once the edits pause."""
+        """Apply `change` to the task data: the new scene is built now (a failure is said and the controls go back); once
+        the steps shown are dealt with (unsaved ones: asked in `client`'s tab), the workbench shows it and it is checked
+        when the edits pause. False when the edit was refused or waits for the answer."""
         with self._lock:
             if self._syncing:
                 return False
             try:
                 if self.wb.session_panel.busy():
                     raise RegraspError("a step is running: wait for it to finish, then edit the task")
+                if self._asking is not None and self._asking.client_id in self.wb.server.get_clients():
+                    raise RegraspError("answer the question about the steps run first")
                 data = change(self._data)
                 scene = scene_from_dict(data, self._source, robot_path or self._robot_path, self._scene.meshes)
             except Exception as exc:  # a refused edit never takes the workbench down
                 self._refuse(error_text(exc), client)
                 self._sync()
                 return False
-            self._scene, self._data, self.edited = scene, data, True
-            self._robot_path = robot_path or self._robot_path
-            self._sync()
-        self.check.content = "*Check: running…*"
-        self.live.request(scene)
-        return True
+            done: list[bool] = []
+
+            def commit() -> None:
+                with self._lock:
+                    self._asking = None
+                    self._scene, self._data, self.edited = scene, data, True
+                    self._robot_path = robot_path or self._robot_path
+                    self._sync()
+                self.check.content = "*Check: running…*"
+                self.live.request(scene)
+                done.append(True)
+
+            def cancelled() -> None:
+                with self._lock:
+                    self._asking = None
+                    self._sync()
+            self._asking = client
+            self.wb.session_panel.ask_unsaved(client, "edit the task", commit, cancelled)
+            return bool(done)
 
     def _refuse(self, message: str, client: viser.ClientHandle | None) -> None:
         self.status.content = f"<span style='color:#d22'>**Edit refused:**</span> {plain(message)}"
@@ -202,20 +219,20 @@ class TaskEditor:
         if obstacle is not None:
             self._edit(lambda d: with_obstacle_pose(d, obstacle.name, xyz, heading(obstacle.pose)), client)
 
-    def _handle_moved(self, name: str, position: np.ndarray, yaw: float, ended: bool) -> None:
+    def _handle_moved(self, name: str, position: np.ndarray, yaw: float, ended: bool, client: viser.ClientHandle | None) -> None:
         """A handle dragged: a placement previewed resting on its support while it moves, and edited when it is let go."""
         if name == "obstacle":
             obstacle = self.handles.obstacle
             if ended and obstacle is not None:
-                self._edit(lambda d: with_obstacle_pose(d, obstacle, position, yaw), None)
+                self._edit(lambda d: with_obstacle_pose(d, obstacle, position, yaw), client)
             return
         try:
             placement = rest_on_support(self._scene, name, position, yaw)
         except RegraspError as exc:
-            self._refuse(str(exc), None)
+            self._refuse(str(exc), client)
             return
         if ended:
-            self._edit(lambda d: with_placement(d, name, placement), None)
+            self._edit(lambda d: with_placement(d, name, placement), client)
             return
         layer, T = self.wb.scene_layer, pose(placement["xyz"], placement["rpy"])
         if layer is not None and name == "initial":
@@ -274,7 +291,7 @@ class TaskEditor:
             if scene is not self._scene or scene is self.wb.scene or self.wb.session_panel.busy():
                 return
             self._applying = scene
-        self.wb.show_task(scene)
+        self.wb.replace_task(scene)  # the person was asked about unsaved steps when the edit was made
 
     def _show_check(self, text: str) -> None:
         self.check.content = text
@@ -304,7 +321,7 @@ class TaskEditor:
             data = {**self._data, "name": check_task_name(path.stem)}
             write_task(data, self._source, path, overwrite)
         if self.wb.session is None or not self.wb.session.finished():
-            self.wb.show_task(load_task(path))
+            self.wb.replace_task(load_task(path))
         return path
 
     def _save_reporting(self, path: Path, client: viser.ClientHandle, overwrite: bool = False) -> None:

@@ -17,7 +17,8 @@ from planner.model.geometry import heading
 ROOT = "/task_editor"
 PLACEMENT_SCALE = 0.18  # m: a placement handle's arm length
 OBSTACLE_SCALE = 0.25
-Moved = Callable[[str, np.ndarray, float, bool], None]  # (handle name, position, heading in rad, whether the drag ended)
+# (handle name, position, heading in rad, whether the drag ended, the dragging tab)
+Moved = Callable[[str, np.ndarray, float, bool, viser.ClientHandle | None], None]
 
 
 def wxyz_heading(wxyz: np.ndarray) -> float:
@@ -50,7 +51,8 @@ class TaskHandles:
 
         def changed(event: viser.TransformControlsEvent) -> None:
             if event.phase != "start":
-                self._moved(name, np.array(event.target.position, float), wxyz_heading(event.target.wxyz), event.phase == "end")
+                self._moved(name, np.array(event.target.position, float), wxyz_heading(event.target.wxyz),
+                            event.phase == "end", event.client)
         gizmo.on_update(changed)
         return gizmo
 

@@ -92,6 +92,7 @@ class MotionLayer(StepLayer):
         self.now: viser.GuiMarkdownHandle | None = None
         self.export_button: viser.GuiButtonHandle | None = None
         self.trajectory_buttons: viser.GuiButtonGroupHandle | None = None
+        self.controls: viser.GuiFolderHandle | None = None  # the playback controls, in the Playback tab of a live workbench
         self._generation = 0  # bumped to stop a running playback
         self._frame_lock = threading.Lock()  # a playback frame and pause / removal never interleave
 
@@ -153,6 +154,9 @@ class MotionLayer(StepLayer):
         gui = self.server.gui
         n = len(result.t)
         with gui.add_folder("Motion") as self.folder:
+            gui.add_markdown(self.summary(result))
+        tabs = getattr(self.workbench, "tabs", None)
+        with tabs.playback if tabs is not None else contextlib.nullcontext(), gui.add_folder("Motion") as self.controls:
             if n:
                 self.now = gui.add_markdown("")
                 self.timeline = gui.add_slider("Sample", min=0, max=max(n - 1, 1), step=1, initial_value=0,
@@ -167,7 +171,10 @@ class MotionLayer(StepLayer):
                     self.trajectory_buttons = gui.add_button_group("Trajectory", TRAJECTORY_FORMATS, hint=(
                         "Download the motion as a trajectory file (joint names, time, positions, velocities, phase, holder, "
                         "object pose): JSON shaped as a ROS JointTrajectory, or CSV (docs/sessions.md)"))
-            gui.add_markdown(self.summary(result))
+            else:
+                gui.add_markdown("*The motion step found no motion (see the Steps tab).*")
+        if tabs is not None:
+            tabs.playback_empty.visible = False
         if self.timeline is not None and self.play_button is not None and self.jump is not None:
             self.timeline.on_update(lambda e: self.show(int(e.target.value)))
             self.play_button.on_click(lambda _: self.pause() if self.playing else self.play())
@@ -197,7 +204,7 @@ class MotionLayer(StepLayer):
         if self.playing:
             wb.robot_layer.update(r.q[i])
             wb.scene_layer.place_object(r.object_pose[i])
-            wb.session_panel.showing(TIMELINE)
+            wb.pose_choice.showing(TIMELINE)
         else:
             wb.pose_robot(r.q[i], r.object_pose[i], TIMELINE)
 
@@ -321,6 +328,15 @@ class MotionLayer(StepLayer):
         client.send_file_download(f"{session.folder.name}-motion.html", html.encode(), save_immediately=True)
 
     # -- removal ---------------------------------------------------------------------------------
+
+    def remove_folder(self) -> None:
+        super().remove_folder()
+        if self.controls is not None:
+            self.controls.remove()
+            self.controls = None
+            tabs = getattr(self.workbench, "tabs", None)
+            if tabs is not None:
+                tabs.playback_empty.visible = True
 
     def remove(self) -> None:
         self.stop()
