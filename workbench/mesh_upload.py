@@ -28,7 +28,7 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9_-]+")
 def too_large(size: int) -> str | None:
     """Why an upload of `size` bytes is refused, or None."""
     if size > MAX_UPLOAD_BYTES:
-        return f"is {size / 2**20:.1f} MB, more than the {MAX_UPLOAD_BYTES // 2**20} MB an uploaded mesh may be"
+        return f"is {size:,} bytes, more than the {MAX_UPLOAD_BYTES:,} bytes ({MAX_UPLOAD_BYTES / 2**20:g} MB) an uploaded mesh may be"
     return None
 
 
@@ -68,7 +68,7 @@ def store_upload(filename: str, content: bytes, folder: Path = UPLOADS_DIR) -> P
         raise InputError(name, None, problem)
     with writing(folder):
         folder.mkdir(parents=True, exist_ok=True)
-        staged = folder / f".{name}.upload{os.getpid()}"
+        staged = folder / f".upload{os.getpid()}-{name}"  # hidden, and of the upload's format
         try:
             atomic_write_bytes(staged, content)
             try:
