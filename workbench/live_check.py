@@ -97,7 +97,7 @@ class LiveCheck:
             except Exception as exc:  # a check that fails is shown, never raised in the thread
                 text = f"<span style='color:#d22'>**Check failed:**</span> {plain(error_text(exc))}"
             with self._wake:
-                stale = self._pending is not None
+                stale = self._pending is not None or self._closed  # a newer edit waits, or the workbench closed
             if not stale:
                 self._show(text)
                 self.checked += 1

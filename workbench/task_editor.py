@@ -99,6 +99,7 @@ class TaskEditor:
             self.check = gui.add_markdown("*Check: waiting for the task…*")
             self.save_name = gui.add_text("Save as", "", hint=f"A task name: saved as {tasks_dir}/<name>.toml")
             self.save_button = gui.add_button("Save task as")
+            self.revert_button = gui.add_button("Revert", hint="The task as its file has it: the edits go")
         self.show_handles.on_update(lambda e: setattr(self.handles, "visible", e.target.value))
         for which, vector in (("initial", self.initial), ("final", self.final)):
             vector.on_update(lambda e, which=which: self._typed_placement(which, e.target.value, e.client))
@@ -112,6 +113,7 @@ class TaskEditor:
         self.add_cylinder.on_click(lambda e: self._add("cylinder", e.client))
         self.remove_obstacle.on_click(lambda e: self._edit(lambda d: without_obstacle(d, self.obstacle.value), e.client))
         self.save_button.on_click(lambda e: self._save_clicked(e.client))
+        self.revert_button.on_click(lambda e: self._revert(e.client))
 
     # -- the task shown --------------------------------------------------------------------------
 
@@ -145,6 +147,7 @@ class TaskEditor:
                 self.obstacle.options, self.obstacle.value = names, chosen
                 self._sync_obstacle(chosen)
                 self.status.content = EDITED if self.edited else ""
+                self.revert_button.disabled = not self.edited or self._source.suffix != ".toml"
             finally:
                 self._syncing = False
 
@@ -332,6 +335,15 @@ class TaskEditor:
             return
         self.status.content = f"Saved as *{plain(path)}*: `regrasp plan {plain(path.stem)}` plans it."
         client.add_notification("Task saved", str(path), color="blue", auto_close_seconds=5.0)
+
+    def _revert(self, client: viser.ClientHandle) -> None:
+        """Show the task as its file has it (asking about unsaved steps, as loading a task does)."""
+        try:
+            scene = load_task(self._source)
+        except Exception as exc:  # the file changed meanwhile and is bad now
+            self._refuse(error_text(exc), client)
+            return
+        self.wb.replace_task(scene, client)
 
     def close(self) -> None:
         """Stop the live check and take the handles out of the view."""
