@@ -50,9 +50,9 @@ def _shade(color: tuple[int, int, int], factor: float) -> tuple[int, int, int]:
     return int(r * 255), int(g * 255), int(b * 255)
 
 
-def faint(colors: np.ndarray) -> np.ndarray:
-    """uint8 colours faded toward the background by FAINT."""
-    return np.round(colors + FAINT * (BACKGROUND - colors.astype(float))).astype(np.uint8)
+def faint(colors: np.ndarray, amount: float = FAINT) -> np.ndarray:
+    """uint8 colours faded toward the background by `amount` (0: as they are, 1: the background)."""
+    return np.round(colors + amount * (BACKGROUND - colors.astype(float))).astype(np.uint8)
 
 
 def edge_component_rank(roadmap: Roadmap) -> np.ndarray:
