@@ -118,6 +118,7 @@ def _run_up_to_from_the_gui(wb: Workbench, page: Page, step: str, timeout: float
     """Choose `step` in the session panel, click "Run up to this step" and wait until the step's layer is drawn."""
     panel = wb.session_panel
     panel.until.value = step
+    _tab(page, "Steps")
     page.get_by_role("button", name="Run up to this step").click()
     assert _wait_for(lambda: wb.session_layers is not None and step in wb.session_layers.layers, timeout), panel.message.content
 

@@ -20,6 +20,7 @@ from test_workbench_browser import (
     _object_pixels,
     _project,
     _settled,
+    _tab,
     _until_changed,
     _view,
     _wait_for,
@@ -105,6 +106,7 @@ def test_toggling_one_layer_changes_the_picture_and_leaves_the_others(workbench:
     layers = workbench.session_layers.layers
     others = {name: layer.visible for name, layer in layers.items() if name != "exchange"}
     assert not layers["exchange"].visible
+    _tab(page, "View")  # the Layers folder
     before = _settled(page)
     page.get_by_label("exchange", exact=True).click()
     try:
@@ -180,6 +182,7 @@ def test_each_view_button_moves_the_camera(workbench: Workbench, page: Page) -> 
     targets = {"start": centre(workbench.scene.object_initial), "handover": workbench.exchange_point(),
                "goal": centre(workbench.scene.object_final)}
     assert set(VIEWS) == {"overview", *targets}
+    _tab(page, "View")  # the camera buttons
     for name in ("start", "handover", "goal", "overview"):
         before, position = _settled(page), _client(workbench).camera.position
         page.get_by_role("button", name=name, exact=True).click()

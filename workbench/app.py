@@ -79,13 +79,15 @@ class Workbench:
         """Where a browser finds the workbench."""
         return f"http://{self.host}:{self.server.get_port()}"
 
-    def close(self) -> None:
-        """Stop the server and the workers of a run still going; a collision model still being built is dropped."""
+    def close(self) -> str | None:
+        """Stop the server and the workers of a run still going; a collision model still being built is dropped. Returns
+        where unsaved steps were kept (sessions/<task>-unsaved-N), if there were any."""
         with self._lock:
             self._generation += 1
-        self.session_panel.close()
+        kept = self.session_panel.close()
         self.task_editor.close()
         self.server.stop()
+        return kept
 
     def _build_gui(self, sessions_dir: Path) -> None:
         """The panel: the tabs (task, steps, playback, joints, view), and the collision status below them."""
@@ -371,4 +373,6 @@ def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 808
     except KeyboardInterrupt:
         pass
     finally:
-        workbench.close()
+        kept = workbench.close()
+        if kept is not None:
+            print(f"regrasp workbench: {kept}", file=sys.stderr, flush=True)

@@ -20,6 +20,7 @@ class PoseChoice:
         self._pose = pose
         self.poses: dict[str, Pose] = {}
         self._syncing = False  # True while the dropdown is rewritten here: its callback must not pose the robot
+        self._watcher: Callable[[str], None] | None = None
         self.dropdown = gui.add_dropdown("Robot at", (INITIAL,), hint="The robot and the object as the task or a step found "
                                          "them; says what is shown", order=order)
         self.dropdown.on_update(lambda e: self._chosen(e.target.value))
@@ -39,8 +40,14 @@ class PoseChoice:
             pose = self.poses[label]
             self._pose(pose.q, pose.object_pose, label)
 
+    def watch(self, watcher: Callable[[str], None] | None) -> None:
+        """Tell `watcher` (one at a time: the motion's timeline; None: nobody) each label the robot is shown at."""
+        self._watcher = watcher
+
     def showing(self, label: str) -> None:
         """Make the dropdown say what the robot is shown at (a label it does not offer yet is added)."""
+        if self._watcher is not None:
+            self._watcher(label)
         if self.dropdown.value == label:
             return
         self._syncing = True

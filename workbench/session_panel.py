@@ -326,20 +326,28 @@ class SessionPanel:
     def scratch(self, folder: Path | None) -> None:
         """Replace the scratch session; the one replaced is deleted once its unsaved steps are kept (`discard_scratch`)."""
         if self._scratch is not None and self._scratch != folder:
-            said = discard_scratch(self._scratch, self.sessions_dir, self._saved_records)
-            if said is not None:
-                self._say(*said)
-                self.saved.options = self._saved_options()
-            self._saved_records = None
+            self._drop_scratch()
         self._scratch = folder
 
-    def close(self) -> None:
-        """Stop a run still going (its workers), then delete the scratch session."""
+    def _drop_scratch(self) -> tuple[str, str, bool] | None:
+        """Delete the scratch session once its unsaved steps are kept; what was said about them, if anything."""
+        assert self._scratch is not None
+        said = discard_scratch(self._scratch, self.sessions_dir, self._saved_records)
+        if said is not None:
+            self._say(*said)
+            self.saved.options = self._saved_options()
+        self._scratch, self._saved_records = None, None
+        return said
+
+    def close(self) -> str | None:
+        """Stop a run still going (its workers), then delete the scratch session; where its unsaved steps were kept (or
+        why they could not be), if there were any."""
         job = self.job
         if job is not None and job.is_alive():
             stop_pools(job)
             job.join(JOIN_SECONDS)
-        self.scratch = None
+        said = self._drop_scratch() if self._scratch is not None else None
+        return f"{said[0]}: {said[1]}" if said is not None else None
 
     def _start(self, work: Callable[[], None]) -> threading.Thread | None:
         """Run `work` in a background thread with the run buttons disabled and the progress bar shown."""

@@ -56,3 +56,13 @@ def move_cameras(server: viser.ViserServer, position: np.ndarray, look_at: np.nd
     for job in jobs:
         job.start()
     return jobs
+
+
+def follow_cameras(server: viser.ViserServer, shift: np.ndarray) -> None:
+    """Move every connected client's camera, and the point it looks at, by `shift` (the camera follows something)."""
+    shift = np.asarray(shift, float)
+    for client in server.get_clients().values():
+        camera = client.camera
+        with client.atomic():
+            camera.look_at = tuple(np.asarray(camera.look_at, float) + shift)
+            camera.position = tuple(np.asarray(camera.position, float) + shift)
