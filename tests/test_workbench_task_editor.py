@@ -137,7 +137,6 @@ def test_an_uploaded_mesh_plans_through_double_grasps(workbench: Workbench, page
     assert _checked(workbench, editor.live.checked)
     monkeypatch.setattr(session_panel, "run_pipeline", lambda s, until, params, progress: run_pipeline(
         s, until, params or SMALL, progress))
-    _tab(page, "Steps")
     _run_up_to_from_the_gui(workbench, page, "double_grasps", timeout=900)
     pairs = workbench.session.result("double_grasps")
     assert len(pairs) > 0 and workbench.session.scene.object_name.endswith("small_box.stl")
