@@ -183,8 +183,8 @@ class TaskEditor:
                 data = change(self._data)
                 scene = scene_from_dict(data, self._source, robot_path or self._robot_path, self._scene.meshes)
             except Exception as exc:  # a refused edit never takes the workbench down
+                self._sync()  # the controls go back, then say why
                 self._refuse(error_text(exc), client)
-                self._sync()
                 return False
             done: list[bool] = []
 
@@ -250,8 +250,8 @@ class TaskEditor:
         try:
             joints = load_robot(path).joint_names()
         except Exception as exc:  # a broken spec file: said, the task stays
-            self._refuse(error_text(exc), client)
             self._sync()
+            self._refuse(error_text(exc), client)
             return
         dropped: list[str] = []
 
