@@ -25,7 +25,6 @@ from planner.model.robot import load_robot
 from planner.model.task import OBJECTS_DIR, ROBOTS_DIR, Scene, load_task, scene_from_dict
 from planner.model.task_edit import (
     MAX_STEP,
-    PLACEMENTS,
     TaskData,
     rest_on_support,
     support_top,
@@ -40,8 +39,8 @@ from planner.model.task_edit import (
 from planner.model.task_file import check_task_name, file_reference, task_path, write_task
 
 from .live_check import LiveCheck
-from .meshes import matrix_wxyz
 from .mesh_upload import ACCEPTED, UPLOADS_DIR, store_upload
+from .meshes import matrix_wxyz
 from .notify import error_text
 from .task_handles import TaskHandles
 
