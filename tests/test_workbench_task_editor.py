@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import trimesh
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import _free_port, _open, _project, _run_up_to_from_the_gui, _tab, _wait_for
+from test_workbench_browser import _free_port, _open, _project, _run_up_to_from_the_gui, _settled, _tab, _wait_for
 
 from planner.core.paths import DEFAULT_TASK, PROJECT_ROOT
 from planner.core.runner import run_pipeline
@@ -63,7 +63,7 @@ def test_the_goal_typed_changes_the_task_the_check_follows_and_save_writes_a_che
                                                                                           page: Page) -> None:
     editor = workbench.task_editor
     assert _checked(workbench, 1), "the task shown was never checked"
-    page.get_by_text("(0.500, 0.850, 0.720) m", exact=False).first.wait_for(timeout=10_000)
+    page.get_by_text("(0.500, 0.850, 0.720) m", exact=False).first.wait_for(timeout=30_000)
     checked = editor.live.checked
     row = page.locator(".mantine-Flex-root", has=page.get_by_text("Goal x, y, °", exact=True)).last
     y = row.locator("input").nth(1)
@@ -72,7 +72,7 @@ def test_the_goal_typed_changes_the_task_the_check_follows_and_save_writes_a_che
     assert _wait_for(lambda: abs(workbench.scene.object_final[1, 3] - 0.88) < 1e-9, 30), "the typed goal did not change the task"
     assert workbench.scene.object_final[2, 3] == pytest.approx(0.72)  # still on the desk
     assert _checked(workbench, checked + 1), "the edit was not checked"
-    page.get_by_text("(0.500, 0.880, 0.720) m", exact=False).first.wait_for(timeout=10_000)
+    page.get_by_text("(0.500, 0.880, 0.720) m", exact=False).first.wait_for(timeout=30_000)
     assert "OK: a valid two-hand regrasping task" in editor.check.content
     assert page.get_by_text("Edited, not saved", exact=False).count() > 0
 
@@ -88,7 +88,7 @@ def test_the_goal_typed_changes_the_task_the_check_follows_and_save_writes_a_che
     assert _wait_for(lambda: workbench.scene.source == saved.resolve(), 30), "the saved task is not the one shown"
 
     page.get_by_role("button", name="Save task as").click()  # the name is taken now: asked, and kept until confirmed
-    page.get_by_text("already exists. Replace it", exact=False).wait_for(timeout=10_000)
+    page.get_by_text("already exists. Replace it", exact=False).wait_for(timeout=30_000)
     page.get_by_role("button", name="Cancel").click()
     assert saved.read_text() == (editor.tasks_dir / "goal-moved.toml").read_text()
 
@@ -102,7 +102,7 @@ def test_dragging_the_goal_handle_moves_the_goal(workbench: Workbench, page: Pag
     assert _wait_for(lambda: editor.handles.visible, 10)
     for glide in workbench.show_view("goal"):
         glide.join()
-    time.sleep(1.0)  # the browser's camera reports its pose after the glide
+    _settled(page, timeout=60)  # drawn where the glide ended: the camera the browser reports is the one it draws with
     checked, before = editor.live.checked, workbench.scene.object_final.copy()
     origin, y_axis = before[:3, 3], before[:3, 1]  # the handle turns with the goal's heading: its y arrow along the pose's y
     start = _project(workbench, origin + 0.8 * PLACEMENT_SCALE * y_axis)
@@ -119,7 +119,40 @@ def test_dragging_the_goal_handle_moves_the_goal(workbench: Workbench, page: Pag
     assert after[2, 3] == pytest.approx(0.72) and np.dot(after[:3, 3] - origin, y_axis) > 0.03
     assert np.linalg.norm(np.cross(after[:3, 3] - origin, y_axis)) < 0.01  # along the arrow only
     assert _checked(workbench, checked + 1)
-    page.get_by_text(f"({after[0, 3]:.3f}, {after[1, 3]:.3f}, 0.720) m", exact=False).first.wait_for(timeout=10_000)
+    page.get_by_text(f"({after[0, 3]:.3f}, {after[1, 3]:.3f}, 0.720) m", exact=False).first.wait_for(timeout=30_000)
+
+
+def test_an_edit_asks_before_the_steps_run_go(workbench: Workbench, page: Page) -> None:
+    """With a step run and not saved, an edit asks first: Cancel keeps the task and the step; Keep keeps the step as
+    sessions/<task>-unsaved-1 and makes the edit."""
+    editor = workbench.task_editor
+    editor.final.value = (0.5, 0.88, 150.0)  # a goal the arms step accepts (the drag may have left it in the lamp)
+    assert editor.live.idle.wait(CHECK_SECONDS) and "Check: OK" in editor.check.content, editor.check.content
+    job = workbench.session_panel.run_until("arms")
+    assert job is not None
+    job.join(120)
+    assert workbench.session is not None and workbench.session.finished() == ["arms"], workbench.session_panel.message.content
+    goal = workbench.scene.object_final.copy()
+    _tab(page, "Task")
+    row = page.locator(".mantine-Flex-root", has=page.get_by_text("Goal x, y, °", exact=True)).last
+    y = row.locator("input").nth(1)
+    y.fill("0.87")
+    y.press("Tab")
+    page.get_by_text("The steps run here are not saved", exact=False).wait_for(timeout=30_000)
+    page.get_by_role("button", name="Cancel").click()
+    assert _wait_for(lambda: editor.final.value[1] == pytest.approx(goal[1, 3]), 10), "the control did not go back"
+    assert workbench.session.finished() == ["arms"] and (workbench.scene.object_final == goal).all()
+    y.fill("0.87")
+    y.press("Tab")
+    keep = page.get_by_role("button", name="Keep as", exact=False)
+    keep.wait_for(timeout=30_000)
+    kept = keep.inner_text().removeprefix("Keep as ").strip()
+    keep.click()
+    assert _wait_for(lambda: workbench.scene.object_final[1, 3] == pytest.approx(0.87) and workbench.session is None, 30), \
+        editor.status.content
+    folder = workbench.session_panel.sessions_dir / kept
+    assert _wait_for(lambda: Session.exists(folder), 30), f"the step was not kept in {folder}"
+    assert Session.open(folder).finished() == ["arms"]
 
 
 @pytest.mark.slow
