@@ -141,6 +141,7 @@ def test_an_edit_asks_before_the_steps_run_go(workbench: Workbench, page: Page) 
     page.get_by_text("The steps run here are not saved", exact=False).wait_for(timeout=30_000)
     page.get_by_role("button", name="Cancel").click()
     assert _wait_for(lambda: editor.final.value[1] == pytest.approx(goal[1, 3]), 10), "the control did not go back"
+    assert _wait_for(lambda: float(y.input_value()) == pytest.approx(goal[1, 3], abs=1e-3), 30), "the page's field did not"
     assert workbench.session.finished() == ["arms"] and (workbench.scene.object_final == goal).all()
     y.fill("0.87")
     y.press("Tab")
