@@ -71,6 +71,7 @@ class TaskEditor:
         self._applying: Scene | None = None  # the edited scene being handed to the workbench
         self._asking: viser.ClientHandle | None = None  # the tab asked about unsaved steps an edit would drop, until it answers
         self.edited = False
+        self._closed = False
         self.handles = TaskHandles(workbench.server, self._handle_moved)
         self.live = LiveCheck(self._apply, self._show_check)
         gui = workbench.server.gui
@@ -345,7 +346,10 @@ class TaskEditor:
         self.wb.replace_task(scene, client)
 
     def close(self) -> None:
-        """Stop the live check and take the handles out of the view."""
-        self.live.close()
-        self.handles.remove()
+        """Stop the live check and take the handles out of the view (once: closing again does nothing)."""
+        with self._lock:
+            closed, self._closed = self._closed, True
+        if not closed:
+            self.live.close()
+            self.handles.remove()
 
