@@ -102,3 +102,23 @@ def test_phase_label_moves_with_the_object_and_loop_restarts(workbench: Workbenc
         playback.loop.value = False
         playback.speed.value = 1.0
         playback.seek(0)
+
+
+def test_camera_follows_the_object(workbench: Workbench, page: Page, layer: MotionLayer) -> None:
+    """With "Camera follows", moving the timeline moves the camera and the point it looks at by the object's move."""
+    playback, r = layer.playback, layer.result
+    carry = np.flatnonzero(r.phase == list(r.phase_names).index("Carry"))
+    a, b = int(carry[0]), int(carry[len(carry) // 2])
+    playback.seek(a)
+    camera = next(iter(workbench.server.get_clients().values())).camera
+    playback.follow.value = True
+    try:
+        look_at, position = np.array(camera.look_at), np.array(camera.position)
+        playback.seek(b)
+        shift = playback.centres[b] - playback.centres[a]
+        assert np.linalg.norm(shift) > 0.05, "the object hardly moves in Carry"
+        assert _wait_for(lambda: np.allclose(camera.look_at, look_at + shift, atol=2e-3)), "the camera did not follow"
+        assert np.allclose(camera.position, position + shift, atol=2e-3)
+    finally:
+        playback.follow.value = False
+        playback.seek(0)

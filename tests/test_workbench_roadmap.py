@@ -111,6 +111,7 @@ def test_a_decimated_view_first_and_more_on_request(workbench: Workbench, page: 
     assert len(first) == MOVE_BUDGET and len(np.unique(first)) == len(first)
     edge = wrist_segments(roadmap)[2]
     assert len(np.unique(roadmap.node_component[roadmap.edges[edge[first], 0]])) > 1, "one component only"
+    _tab(page, "Steps")
     page.get_by_text(f"Drawn: {MOVE_BUDGET} of {total} wrist moves").wait_for(timeout=10_000)
     try:
         page.get_by_role("slider").nth(0).focus()  # the Roadmap folder's first slider: "Moves drawn"
@@ -128,20 +129,37 @@ def test_a_decimated_view_first_and_more_on_request(workbench: Workbench, page: 
     assert len(layer.moves_drawn()) == MOVE_BUDGET
 
 
-def test_the_page_answers_within_2_s(workbench: Workbench, page: Page, layer: RoadmapLayer) -> None:
-    """With the roadmap drawn (as after its step), a click on "Show robot" reaches the workbench and the browser draws the
-    robot gone within 2 s (what a person waits for, measured as the browser sees it)."""
-    assert layer.visible and len(layer.moves_drawn()) == MOVE_BUDGET
-    _tab(page, "View")
+def _answer_seconds(workbench: Workbench, page: Page, limit: float) -> float | None:
+    """Seconds from a click on "Show robot" (View tab) until the workbench has it and a screenshot taken after it shows
+    the robot gone (its completion: an upper bound of when the browser drew it); None: not within `limit`. The robot is
+    shown again after."""
     try:
         before = _settled(page)
         start = time.monotonic()
         page.get_by_label("Show robot").click()
-        assert _wait_for(lambda: workbench.show_robot.value is False, 2.0), "the click did not reach the workbench in 2 s"
-        assert _wait_for(lambda: _changed(_view(page), before) > CHANGED, 2.0), "the robot was still drawn 2 s after the click"
-        print(f"answered in {time.monotonic() - start:.2f} s")
+        while time.monotonic() - start < limit:
+            if workbench.show_robot.value is False and _changed(_view(page), before) > CHANGED:
+                return time.monotonic() - start
+            time.sleep(0.05)
+        return None
     finally:
         workbench.show_robot.value = True
+
+
+def test_the_page_answers_within_2_s(workbench: Workbench, page: Page, layer: RoadmapLayer) -> None:
+    """With the roadmap drawn as after its step (its first MOVE_BUDGET moves), a click on "Show robot" reaches the
+    workbench and the browser draws the robot gone within 2 s (what a person waits for, measured as the browser sees
+    it). Printed for docs/benchmarks.md: the same with the roadmap hidden."""
+    assert layer.visible and len(layer.moves_drawn()) == MOVE_BUDGET
+    _tab(page, "View")
+    try:
+        seconds = _answer_seconds(workbench, page, 2.0)
+        assert seconds is not None and seconds <= 2.0, "the page did not answer the click within 2 s"
+        layer.visible = False
+        hidden = _answer_seconds(workbench, page, 60.0)
+        print(f"answered in {seconds:.2f} s with {MOVE_BUDGET} moves drawn, in {hidden or float('nan'):.2f} s with the roadmap hidden")
+    finally:
+        layer.visible = True
         _tab(page, "Steps")
 
 

@@ -132,14 +132,14 @@ class Workbench:
             return
         if self.session_panel.busy():  # the run would throw the new task away when it ends
             self.task_tab.refuse("Not loaded", "a step is running: wait for it to finish, then load the task", client)
-            self.task_tab.show(self.scene, self.session)
+            self.task_tab.choose(self.scene)
             return
         self.task_tab.error.visible = False
         try:
             scene = load_task(path)
         except Exception as exc:  # a bad file must never take the workbench down
             self.task_tab.refuse("Could not load the task", error_text(exc), client)
-            self.task_tab.show(self.scene, self.session)
+            self.task_tab.choose(self.scene)
             return
         self.replace_task(scene, client)
 
@@ -152,7 +152,7 @@ class Workbench:
             self.session_panel.scratch = None  # the last task's unsaved steps kept (and said) now, not at the next run
 
         self.session_panel.ask_unsaved(client, f"load the task {scene.name}", replace,
-                                       cancelled=lambda: self.task_tab.show(self.scene, self.session))
+                                       cancelled=lambda: self.task_tab.choose(self.scene))
 
     def show_session(self, session: Session) -> None:
         """Draw a session: its step layers, and its scene too when it is not the one shown."""

@@ -60,6 +60,8 @@ class Playback:
         self.playing = False
         self._generation = 0  # bumped to stop a running playback
         self._frame_lock = threading.Lock()  # a playback frame and pause / removal never interleave
+        self._followed = 0  # the sample the cameras were last moved for (followed or not)
+        self._follow_lock = threading.Lock()
         self.label = server.scene.add_label(f"{root}/phase", "", position=tuple(centres[0] + (0, 0, LABEL_HEIGHT)),
                                             anchor="bottom-center", font_screen_scale=1.2)
         self.now: viser.GuiMarkdownHandle | None = None
@@ -102,11 +104,13 @@ class Playback:
 
     def show(self, i: int) -> None:
         """Draw sample i (clipped), then put in place what it poses; the camera follows the object if asked."""
-        previous = self.index
         i = self.draw(i)
         self._pose(i, self.playing)
-        if self.follow is not None and self.follow.value and i != previous:
-            follow_cameras(self.server, self.centres[i] - self.centres[previous])
+        with self._follow_lock:  # two shows at once (viser runs callbacks in a thread pool) move the cameras once
+            shift = self.centres[i] - self.centres[self._followed]
+            self._followed = i
+        if self.follow is not None and self.follow.value and np.any(shift):
+            follow_cameras(self.server, shift)
 
     def draw(self, i: int) -> int:
         """Make sample i (clipped) the shown one: the phase label above the object and the caption; returns i."""

@@ -59,8 +59,8 @@ class TaskTab:
         if client is not None:
             client.add_notification(title, message, color="red", auto_close_seconds=10.0)
 
-    def show(self, scene: Scene, session: Session | None) -> None:
-        """Make the controls name `scene` (a replayed session's task as the session names it), without loading anything."""
+    def choose(self, scene: Scene) -> None:
+        """Make the dropdown name `scene` (e.g. back to the task shown when another was refused), loading nothing."""
         self.files = task_choices(scene.source)
         self.syncing = True  # viser calls on_update synchronously, within this block
         try:
@@ -68,6 +68,10 @@ class TaskTab:
             self.choice.value = self.label_of(scene.source)
         finally:
             self.syncing = False
+
+    def show(self, scene: Scene, session: Session | None) -> None:
+        """Make the controls name `scene` (a replayed session's task as the session names it), without loading anything."""
+        self.choose(scene)
         # a replayed session's task file is its session.json: show the task it came from (a name or a relative path)
         self.path.value = session.manifest.get("task_source", "") if session is not None and scene is session.scene \
             else str(scene.source)

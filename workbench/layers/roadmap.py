@@ -40,7 +40,7 @@ MARK_COLOR = (250, 20, 160)
 FPS = 30.0
 WRIST_STEP = 0.03  # m: the largest wrist move between two animation frames ...
 JOINT_STEP = 0.05  # rad: ... and the largest joint move (for the torso, which moves the wrists little but the body a lot)
-MOVE_BUDGET = 1500  # wrist moves drawn at first: software WebGL redraws every line each frame, so the page stays responsive
+MOVE_BUDGET = 600  # wrist moves drawn at first: software WebGL redraws every line each frame, so the page stays responsive
 SHOWN = ("every component", "the largest component", "the chosen node's component")  # whose moves are drawn
 
 
