@@ -19,6 +19,7 @@ from planner.model.task_edit import (
     rest_on_support,
     support_top,
     with_new_obstacle,
+    with_object_mesh,
     with_obstacle_pose,
     with_placement,
     with_robot,
@@ -172,3 +173,13 @@ def test_another_robot_keeps_only_its_joints(default_scene: Scene) -> None:
     assert dropped == ["LeftElbowPitch", "RightElbowPitch"]
     scene = scene_from_dict(data, default_scene.source, meshes=default_scene.meshes)
     assert scene.robot.spec.name == "baxter-allegro" and np.array_equal(scene.q_initial, baxter.configuration({}))
+
+
+def test_a_y_up_mesh_is_turned_upright(tmp_path: Path, default_scene: Scene) -> None:
+    """A mesh whose long side is its file's y axis, given up = y, stands with that side vertical."""
+    tall = trimesh.creation.box(extents=(0.05, 0.2, 0.06))
+    tall.export(tmp_path / "tall.stl")
+    data = with_object_mesh(default_scene.task, str(tmp_path / "tall.stl"), "y")
+    scene = scene_from_dict(data, default_scene.source, meshes=default_scene.meshes)
+    assert scene.object_mesh.extents == pytest.approx([0.05, 0.06, 0.2])
+    assert "up" not in with_object_mesh(data, "statuette")["object"]

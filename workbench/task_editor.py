@@ -269,7 +269,8 @@ class TaskEditor:
             self._refuse(error_text(exc), client)
             return
         reference = file_reference(path, self._source.parent, OBJECTS_DIR)
-        if self._edit(lambda d: with_object_mesh(d, reference), client) and client is not None:
+        up = "y" if path.suffix == ".glb" else "z"  # glTF files are y-up
+        if self._edit(lambda d: with_object_mesh(d, reference, up), client) and client is not None:
             client.add_notification("Mesh uploaded", f"the object is now {path.name}", color="blue", auto_close_seconds=5.0)
 
     def _add(self, shape: str, client: viser.ClientHandle) -> None:

@@ -94,12 +94,14 @@ def with_robot(data: TaskData, robot: str, joint_names: list[str]) -> tuple[Task
     return data, sorted(set(dropped))
 
 
-def with_object_mesh(data: TaskData, mesh: str) -> TaskData:
-    """The task with another object mesh (a file reference, in metres and z-up: scale and up axis are dropped)."""
+def with_object_mesh(data: TaskData, mesh: str, up: str = "z") -> TaskData:
+    """The task with another object mesh (a file reference, in metres, its up axis `up`: a scale given before goes)."""
     data = copy.deepcopy(data)
     data["object"]["mesh"] = mesh
     data["object"].pop("scale", None)
     data["object"].pop("up", None)
+    if up != "z":
+        data["object"]["up"] = up
     return data
 
 
