@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -189,8 +190,16 @@ def _files(roadmap: Roadmap, folder: Path) -> dict[str, bytes]:
 
 
 def test_same_seed_same_roadmap(default_scene, small, tmp_path):
-    again = build_roadmap(default_scene, SMALL, seed=11)[0]
+    """The same seed builds the same files; the edge stage's progress counts the candidates checked of all, and the
+    edges kept, up to those of the result."""
+    said: list[str] = []
+    again = build_roadmap(default_scene, SMALL, seed=11, progress=lambda _, message="": said.append(message))[0]
     assert _files(again, tmp_path / "again") == _files(small, tmp_path / "small")
+    counts = [tuple(int(x.replace(",", "")) for x in m.groups())
+              for m in (re.fullmatch(r"Super Graph edges: ([\d,]+) of ([\d,]+) candidates checked, ([\d,]+) kept", s) for s in said) if m]
+    assert len(counts) > 1 and counts == sorted(counts), said
+    checked, total, kept = counts[-1]
+    assert checked == total >= kept == len(again.edges)
 
 
 def test_tree_variant_is_a_forest_over_the_same_components(default_scene, small):

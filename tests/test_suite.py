@@ -21,13 +21,13 @@ from PIL import Image
 
 from planner.check import check_task
 from planner.core.errors import InputError
+from planner.core.toml_text import toml_text
 from planner.core.tomlread import load_toml
 from planner.core.user_cache import computing
 from planner.model.task import find_task, load_task
 from planner.suite.generate import generate_tasks
 from planner.suite.report import write_report
 from planner.suite.spec import load_suite
-from planner.suite.toml_text import toml_text
 from workbench.cli import main
 
 UNTIL = "place_grasps"

@@ -24,7 +24,8 @@ from planner.model.shapes import box, obj_text, on_desk
 from planner.model.task import load_task
 from planner.motion.result import PHASES, TABLE_PHASES, Motion
 from planner.regrasp.placements import PlacementParams, stable_placements
-from workbench.layers.motion import PHASE_COLORS, route_segments, table_one
+from workbench.layers.motion import route_segments, table_one
+from workbench.layers.phases import PHASE_COLORS
 
 DESK_TOP = 0.72  # m: the default desk's top surface (assets/tasks/default.toml)
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"

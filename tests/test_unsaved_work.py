@@ -6,6 +6,7 @@ from __future__ import annotations
 import html
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from sandbox import EXAMPLE
@@ -13,7 +14,9 @@ from test_workbench_browser import _free_port
 
 from planner.core.paths import DEFAULT_TASK, TASKS_DIR
 from planner.core.session import Session
+from workbench import session_panel
 from workbench.app import Workbench
+from workbench.session_dialogs import CANCEL, DISCARD, SAVE
 
 
 @pytest.fixture
@@ -75,3 +78,40 @@ def test_saved_work_and_an_untouched_copy_are_not_kept_again(bench: Workbench, s
     bench.session_panel.run_until("arms")  # nothing to run: arms is finished in `good`
     bench.close()
     assert _kept(sessions) == [], "saved work, or a loaded session with nothing run on it, was copied as unsaved"
+
+
+class _Client:
+    """Stands in for the tab a dialog is asked in: the question's `answer` is kept to be given by the test."""
+
+    def __init__(self) -> None:
+        self.asked: list[tuple[list[str], str, str, str]] = []
+        self.answer: Any = None
+
+
+@pytest.mark.slow  # two runs of the arms step
+def test_the_dialogs_answers_save_discard_or_cancel(bench: Workbench, sessions: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Cancel leaves all as it was; Discard loads the task and keeps nothing; Save writes sessions/<name> first."""
+    client = _Client()
+
+    def asked(_: Any, steps: list[str], what: str, name: str, kept_as: str, answer: Any) -> None:
+        client.asked.append((steps, what, name, kept_as))
+        client.answer = answer
+
+    monkeypatch.setattr(session_panel, "ask_unsaved", asked)
+    panel = bench.session_panel
+    scratch = _run_arms(bench)
+    bench._load(TASKS_DIR / "baxter.toml", client)
+    assert client.asked == [(["arms"], "load the task baxter", "untitled", "default-unsaved-1")]
+    client.answer(CANCEL)
+    assert bench.scene.source.stem == "default" and bench.task_tab.choice.value == "default" and scratch.exists()
+    bench._load(TASKS_DIR / "baxter.toml", client)
+    client.answer(DISCARD)
+    assert bench.scene.source.stem == "baxter" and not scratch.exists() and _kept(sessions) == []
+
+    bench._load(DEFAULT_TASK, None)
+    _run_arms(bench)
+    panel.name.value = "mine"
+    panel.ask_unsaved(client, "load the session good", lambda: panel.load(sessions / "good"))
+    client.answer(SAVE)
+    assert Session.open(sessions / "mine").finished() == ["arms"] and _kept(sessions) == []
+    assert bench.session.folder == sessions / "good"

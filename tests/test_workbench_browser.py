@@ -78,6 +78,11 @@ def _open(wb: Workbench, browser: Browser) -> Page:
     return page
 
 
+def _tab(page: Page, name: str) -> None:
+    """Open one of the panel's tabs (Task, Steps, Playback, Joints, View)."""
+    page.get_by_role("tab", name=name).click()
+
+
 def _project(workbench: Workbench, point: np.ndarray) -> np.ndarray:
     """Where a world point appears in a screenshot (x, y px), through the browser's camera (OpenCV convention)."""
     camera = next(iter(workbench.server.get_clients().values())).camera
@@ -113,6 +118,7 @@ def _run_up_to_from_the_gui(wb: Workbench, page: Page, step: str, timeout: float
     """Choose `step` in the session panel, click "Run up to this step" and wait until the step's layer is drawn."""
     panel = wb.session_panel
     panel.until.value = step
+    _tab(page, "Steps")
     page.get_by_role("button", name="Run up to this step").click()
     assert _wait_for(lambda: wb.session_layers is not None and step in wb.session_layers.layers, timeout), panel.message.content
 
@@ -163,6 +169,7 @@ def test_collision_checkbox_shows_collision_geometry(workbench: Workbench, page:
     before = _settled(page)
     layer = workbench.collision_layer
     assert layer is not None and not any(h.visible for h in layer.handles.values())
+    _tab(page, "View")
     page.get_by_label("Show collision geometry").click()
     try:
         assert _wait_for(lambda: all(h.visible for h in layer.handles.values())), "the click did not reach the server"
@@ -177,6 +184,7 @@ def test_joint_slider_swings_the_arm(workbench: Workbench, page: Page) -> None:
     robot = workbench.scene.robot
     shoulder = int(robot.part_idx("right")[0])
     before = _settled(page)
+    _tab(page, "Joints")
     page.get_by_role("slider").first.focus()  # the arm's first joint: the shoulder
     page.keyboard.press("Home")
     try:
@@ -190,11 +198,12 @@ def test_bad_task_file_shows_its_error(workbench: Workbench, page: Page, tmp_pat
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "bad"\nrobot = "no_such_robot.toml"\n')
     scene = workbench.scene
+    _tab(page, "Task")
     row = page.locator(".mantine-Flex-root", has=page.get_by_text("Task file", exact=True)).last
     row.locator("input").fill(str(bad))
     page.get_by_role("button", name="Load file").click()
     page.get_by_text("expected a .toml file in").first.wait_for(timeout=10_000)  # not a folder tasks are read from
-    monkeypatch.setattr(workbench, "task_roots", (*workbench.task_roots, tmp_path))  # as if the workbench started there
+    monkeypatch.setattr(workbench.task_tab, "roots", (*workbench.task_tab.roots, tmp_path))  # as if the workbench started there
     page.get_by_role("button", name="Load file").click()
     page.get_by_text("no_such_robot.toml", exact=False).first.wait_for(timeout=10_000)
     assert page.get_by_text("Could not load the task").count() > 0

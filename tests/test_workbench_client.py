@@ -81,7 +81,7 @@ def test_dropdown_values_outside_their_options_are_refused(bench: Workbench, fol
     with _connect(bench) as ws, caplog.at_level(logging.WARNING):
         _change(ws, panel.saved, value="../outside")
         _change(ws, panel.saved, options=["../outside"], value="../outside")  # a client must not rewrite the options
-        _change(ws, bench.task_choice, value="no such task")
+        _change(ws, bench.task_tab.choice, value="no such task")
         _processed(ws, bench, 11)
         assert panel.saved.value == "good" and panel.saved.options == ("good",)
         _change(ws, panel.load_button, value=True)  # Load: what is chosen, never the crafted value
@@ -115,7 +115,7 @@ def test_values_of_the_wrong_type_are_one_line_not_a_traceback(bench: Workbench,
     with _connect(bench) as ws, caplog.at_level(logging.WARNING):
         _change(ws, panel.seed, value="not a number")
         _change(ws, bench.show_robot, value="yes")
-        _change(ws, bench.task_path, value="x" * 100_000)
+        _change(ws, bench.task_tab.path, value="x" * 100_000)
         _send(ws, "ShareUrlRequest")  # would publish the workbench through viser's share server
         _processed(ws, bench, 13)
     assert len(_refusals(caplog)) == 4
@@ -126,12 +126,12 @@ def test_values_of_the_wrong_type_are_one_line_not_a_traceback(bench: Workbench,
 def test_task_file_reads_only_task_folders(bench: Workbench, folders: Path) -> None:
     scene = bench.scene
     with _connect(bench) as ws:
-        _change(ws, bench.task_path, value=str(folders / "secret.toml"))
-        _change(ws, bench.load_button, value=True)
-        assert _wait_for(lambda: bench.task_error.visible)
-    assert bench.scene is scene and "expected a .toml file in" in bench.task_error.content.replace("&#46;", ".")
-    assert "api" not in bench.task_error.content
-    bench.task_error.visible = False
+        _change(ws, bench.task_tab.path, value=str(folders / "secret.toml"))
+        _change(ws, bench.task_tab.load_button, value=True)
+        assert _wait_for(lambda: bench.task_tab.error.visible)
+    assert bench.scene is scene and "expected a .toml file in" in bench.task_tab.error.content.replace("&#46;", ".")
+    assert "api" not in bench.task_tab.error.content
+    bench.task_tab.error.visible = False
 
 
 def test_foreign_origins_are_refused(bench: Workbench, caplog: pytest.LogCaptureFixture) -> None:

@@ -18,6 +18,7 @@ from test_workbench_browser import (
     _open,
     _run_up_to_from_the_gui,
     _settled,
+    _tab,
     _until_changed,
     _wait_for,
 )
@@ -32,9 +33,19 @@ ONLINE = ("grasp_configs", "exchange", "double_grasps")
 pytestmark = pytest.mark.browser
 
 
+def _focus(wb: Workbench, page: Page, step: str) -> None:
+    """Put `step` in focus in the Steps tab (its controls under the table), the online layers shown again after."""
+    _tab(page, "Steps")
+    wb.session_panel.step.value = step
+    for name in ONLINE if wb.layer_toggles is not None else ():
+        if name in wb.layer_toggles.boxes:
+            wb.layer_toggles.boxes[name].value = True
+
+
 def _robot_to_exchange(wb: Workbench, page: Page, layer: DoubleGraspsLayer) -> None:
     """From the initial configuration, click "exchange" in the Double grasps folder: the robot must go to the pair's q_exch."""
     wb.reset()
+    _focus(wb, page, "double_grasps")
     before = _settled(page)
     page.get_by_role("button", name="exchange", exact=True).click()
     assert layer.result is not None
@@ -75,8 +86,10 @@ def test_online_layers_are_drawn(workbench: Workbench, page: Page) -> None:
     assert not workbench.session_layers.errors, workbench.session_layers.errors
     assert isinstance(layers["grasp_configs"], GraspConfigsLayer) and isinstance(layers["exchange"], ExchangeLayer)
     assert isinstance(layers["double_grasps"], DoubleGraspsLayer)
-    page.get_by_text("Exchange position").first.wait_for(timeout=10_000)
+    _focus(workbench, page, "double_grasps")
     page.get_by_text("Pair 1", exact=False).first.wait_for(timeout=10_000)
+    _focus(workbench, page, "exchange")
+    page.get_by_text("Exchange position").first.wait_for(timeout=10_000)
     shown = _settled(page)
     layers["exchange"].visible = False
     try:
@@ -95,12 +108,12 @@ def test_online_layers_are_drawn(workbench: Workbench, page: Page) -> None:
 def test_best_configurations_are_offered(workbench: Workbench) -> None:
     """The session panel's "Robot at" lists the best grasp / place configurations and pair 1's three configurations."""
     result = workbench.session.result("grasp_configs")
-    options = workbench.session_panel.robot_at.options
+    options = workbench.pose_choice.dropdown.options
     best = int(np.argmax(result.pick_score))
     label = f"grasp configs: best pick (rank {result.pick_rank[best] + 1})"
     assert label in options and any(o.startswith("grasp configs: best place") for o in options)
     assert sum(o.startswith("double grasps: pair 1") for o in options) == 3
-    workbench.session_panel.robot_at.value = label
+    workbench.pose_choice.dropdown.value = label
     try:
         assert np.allclose(workbench.q, result.pick_q[best])
     finally:

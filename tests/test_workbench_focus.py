@@ -20,6 +20,7 @@ from test_workbench_browser import (
     _object_pixels,
     _project,
     _settled,
+    _tab,
     _until_changed,
     _view,
     _wait_for,
@@ -79,7 +80,7 @@ def test_only_the_last_step_is_in_focus(workbench: Workbench) -> None:
     rows = [row for row in panel.table.content.splitlines()[2:]]
     assert all(1 <= row.split("|")[4].count("=") <= 3 for row in rows), panel.table.content
     assert "collision_checks" not in panel.table.content  # the roadmap's many figures: in its details only
-    assert workbench.task_path.value == "default" and workbench.task_choice.value == "session example"  # not …/session.json
+    assert workbench.task_tab.path.value == "default" and workbench.task_tab.choice.value == "session example"  # not …/session.json
     panel.step.value = "roadmap"
     try:
         assert workbench.layer_toggles.shown() == ["roadmap"] and "| collision_checks |" in html.unescape(panel.details.content)
@@ -105,6 +106,7 @@ def test_toggling_one_layer_changes_the_picture_and_leaves_the_others(workbench:
     layers = workbench.session_layers.layers
     others = {name: layer.visible for name, layer in layers.items() if name != "exchange"}
     assert not layers["exchange"].visible
+    _tab(page, "View")  # the Layers folder
     before = _settled(page)
     page.get_by_label("exchange", exact=True).click()
     try:
@@ -149,13 +151,13 @@ def test_choosing_a_grasp_rank_frames_it_and_dims_the_rest(workbench: Workbench,
 def test_robot_at_the_exchange_holds_the_object_between_the_hands(workbench: Workbench, page: Page) -> None:
     """"Robot at" pair 1's exchange: the robot at q_exch, and the object's pixels by both hands (not on the desk)."""
     layer: DoubleGraspsLayer = workbench.session_layers.layers["double_grasps"]
-    r, panel = layer.result, workbench.session_panel
+    r = layer.result
     workbench.show_view("handover")
     assert _camera_at(workbench, close_up(workbench.scene_layer.centre(r.object_exchange[0]))[0])
     label, sliders = DoubleGraspsLayer.label(0, "exchange"), dict(workbench._slider_of)
-    panel.robot_at.value = label
+    workbench.pose_choice.dropdown.value = label
     try:
-        assert np.allclose(workbench.q, r.q_exch[0]) and panel.robot_at.value == label
+        assert np.allclose(workbench.q, r.q_exch[0]) and workbench.pose_choice.dropdown.value == label
         assert workbench._slider_of == sliders, "posing the robot rebuilt the joint sliders (they vanish and come back)"
         assert all(np.isclose(slider.value, r.q_exch[0][i]) for i, slider in sliders.items()), "the sliders did not follow"
         mask = _object_pixels(workbench, page)
@@ -171,7 +173,7 @@ def test_robot_at_the_exchange_holds_the_object_between_the_hands(workbench: Wor
     finally:
         workbench.reset()
         workbench.show_view("overview")
-    assert panel.robot_at.value == "task: initial configuration"
+    assert workbench.pose_choice.dropdown.value == "task: initial configuration"
     _settled(page)
 
 
@@ -180,6 +182,7 @@ def test_each_view_button_moves_the_camera(workbench: Workbench, page: Page) -> 
     targets = {"start": centre(workbench.scene.object_initial), "handover": workbench.exchange_point(),
                "goal": centre(workbench.scene.object_final)}
     assert set(VIEWS) == {"overview", *targets}
+    _tab(page, "View")  # the camera buttons
     for name in ("start", "handover", "goal", "overview"):
         before, position = _settled(page), _client(workbench).camera.position
         page.get_by_role("button", name=name, exact=True).click()

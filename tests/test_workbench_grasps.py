@@ -16,6 +16,7 @@ from test_workbench_browser import (
     _open,
     _run_up_to_from_the_gui,
     _settled,
+    _tab,
     _until_changed,
     _wait_for,
 )
@@ -23,7 +24,7 @@ from test_workbench_browser import (
 from planner.core.session import Session
 from workbench.app import Workbench
 from workbench.layers import LAYERS
-from workbench.layers.grasps import GraspsLayer, friction_cones
+from workbench.layers.grasps import CONE_STYLE, CONTACT_COLOR, NORMAL_COLOR, GraspsLayer, friction_cones, legend
 
 pytestmark = pytest.mark.browser
 
@@ -43,8 +44,14 @@ def _look_at_object(wb: Workbench, layer: GraspsLayer) -> None:
 
 
 def _choose_rank(page: Page, layer: GraspsLayer, rank: int) -> None:
-    """Open the layer's folder and pick a rank in its dropdown, as a user would."""
+    """Put the layer's step in focus (its folder under the step table), open the folder and pick a rank in its dropdown,
+    as a user would."""
     assert layer.folder is not None and layer.rank is not None
+    _tab(page, "Steps")
+    if layer.workbench.session_panel.step.value != layer.step:
+        layer.workbench.session_panel.step.value = layer.step
+        for other in layer.workbench.session_layers.layers.values():
+            other.visible = other is layer
     folder = page.get_by_text(layer.folder.label, exact=True)
     folder.wait_for(timeout=10_000)
     if not page.get_by_text("Finger sphere hierarchies").first.is_visible():
@@ -52,6 +59,17 @@ def _choose_rank(page: Page, layer: GraspsLayer, rank: int) -> None:
     label = layer.rank_labels(layer.result)[rank]
     page.get_by_role("textbox", name="Rank").or_(page.get_by_label("Rank")).first.click()
     page.get_by_role("option", name=label, exact=True).click()
+
+
+def test_legend_names_each_mark_in_its_colour() -> None:
+    """The legend shows the contacts', normals' and cones' colours next to their names, the cone's half-angle from μ,
+    and each finger's name (escaped)."""
+    text = legend(0.5, ("thumb", "<b>index</b>"))
+    for color, name in ((CONTACT_COLOR, "contact point"), (NORMAL_COLOR, "surface normal"), (CONE_STYLE[0], "friction cone")):
+        swatch = f"rgb({color[0]},{color[1]},{color[2]})"
+        assert swatch in text and text.index(swatch) < text.index(name), name
+    assert "27°" in text  # atan 0.5
+    assert "thumb" in text and "<b>" not in text
 
 
 def test_friction_cone_geometry() -> None:

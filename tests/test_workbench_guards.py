@@ -76,14 +76,14 @@ def test_task_loading_is_refused_while_a_run_goes(bench: Workbench, blocked_run:
     scene = bench.scene
     job = panel.run_until("arms")
     assert job is not None
-    assert bench.load_button.disabled and bench.task_choice.disabled, "task loading stays enabled during a run"
+    assert bench.task_tab.load_button.disabled and bench.task_tab.choice.disabled, "task loading stays enabled during a run"
     other = ASSETS / "tasks" / "baxter.toml"
     bench._load(other, None)  # what "Load file" (or the task choice) of another tab calls
-    assert bench.scene is scene and bench.task_error.visible and "a step is running" in bench.task_error.content
+    assert bench.scene is scene and bench.task_tab.error.visible and "a step is running" in bench.task_tab.error.content
     blocked_run.set()
     job.join(120)
     assert not job.is_alive() and bench.scene is scene
-    assert not bench.load_button.disabled and not bench.task_choice.disabled
+    assert not bench.task_tab.load_button.disabled and not bench.task_tab.choice.disabled
     bench._load(other, None)  # after the run, loading works again
     assert bench.scene.source == other.resolve()
     bench._load(DEFAULT_TASK, None)

@@ -26,6 +26,7 @@ from test_workbench_browser import (
     _object_pixels,
     _project,
     _settled,
+    _tab,
     _until_changed,
     _view,
     _wait_for,
@@ -36,8 +37,10 @@ from planner.motion.result import PHASE_SECONDS, PHASES, Motion
 from workbench.app import Workbench
 from workbench.export import EXPORT_FPS, MAX_FRAMES, frame_samples
 from workbench.layers import LAYERS
-from workbench.layers.motion import PHASE_COLORS, MotionLayer, route_segments, table_one
+from workbench.layers.motion import MotionLayer, route_segments, table_one
+from workbench.layers.phases import PHASE_COLORS
 from workbench.layers.stages import FAILURE_COLOR
+from workbench.playback import sample_at
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 CARRY, PLACE = PHASES.index("Carry"), PHASES.index("Place")
@@ -133,10 +136,13 @@ def test_layer_helpers(layer: MotionLayer) -> None:
 
 
 def test_motion_layer_is_drawn(workbench: Workbench, page: Page, layer: MotionLayer) -> None:
-    """The layer is registered and drawn: its folder with the timeline, Table I and the current phase."""
+    """The layer is registered and drawn: Table I in the Steps tab, the timeline in the Playback tab saying that the robot
+    is not at its sample (the replay shows it at the task's initial configuration)."""
     assert LAYERS["motion"] is MotionLayer
+    _tab(page, "Steps")
     page.get_by_text("nodes validating").first.wait_for(timeout=10_000)
-    page.get_by_text("Grasp —").first.wait_for(timeout=10_000)
+    _tab(page, "Playback")
+    page.get_by_text("move the timeline or press Play", exact=False).first.wait_for(timeout=10_000)
     shown = _settled(page)
     layer.visible = False
     try:
@@ -154,9 +160,9 @@ def test_object_moves_with_the_hand(workbench: Workbench, page: Page, layer: Mot
     centres = []
     try:
         for phase, i in samples.items():
-            layer.timeline.value = i
+            layer.playback.timeline.value = float(r.t[i])
             assert _wait_for(lambda i=i: np.allclose(workbench.q, r.q[i])), "the timeline did not pose the robot"
-            assert PHASES[phase] in layer.now.content
+            assert PHASES[phase] in layer.playback.now.content and PHASES[phase] in layer.playback.label.text
             seen, expected = _object_on_screen(workbench, page), _project(workbench, _object_centre(layer, i))
             assert np.linalg.norm(seen - expected) < NEAR, f"{PHASES[phase]}: object seen at {seen}, its pose projects to {expected}"
             centres.append(seen)
@@ -165,32 +171,34 @@ def test_object_moves_with_the_hand(workbench: Workbench, page: Page, layer: Mot
                                   - _project(workbench, _object_centre(layer, samples[CARRY])))
         assert moved > 2 * NEAR and abs(moved - expected) < NEAR, f"the object moved {moved:.0f} px on screen, its poses {expected:.0f} px"
     finally:
-        layer.seek(0)
+        layer.playback.seek(0)
 
 
 def test_play_advances_the_timeline(workbench: Workbench, page: Page, layer: MotionLayer) -> None:
     """Play moves the timeline on (robot meshes only: the joint sliders are not rebuilt); Pause stops it with the robot
     fully posed at the shown sample."""
-    layer.seek(0)
-    layer.speed.value = 4.0
+    playback = layer.playback
+    playback.seek(0)
+    playback.speed.value = 4.0
     before = _settled(page)
     sliders = dict(workbench._slider_of)
+    _tab(page, "Playback")
     page.get_by_role("button", name="Play", exact=True).click()
     try:
-        assert _wait_for(lambda: layer.playing and layer.index > len(layer.result.t) // 4, 60), f"stuck at sample {layer.index}"
-        assert layer.timeline.value == layer.index and layer.play_button.label == "Pause"
+        assert _wait_for(lambda: playback.playing and playback.index > len(layer.result.t) // 4, 60), f"stuck at sample {playback.index}"
+        assert sample_at(layer.result.t, playback.timeline.value) == playback.index and playback.play_button.label == "Pause"
         assert workbench._slider_of == sliders, "the joint sliders were rebuilt while playing"
         page.get_by_role("button", name="Pause", exact=True).click()
-        assert _wait_for(lambda: not layer.playing, 10), "Pause did not stop the playback"
-        shown = layer.index
+        assert _wait_for(lambda: not playback.playing, 10), "Pause did not stop the playback"
+        shown = playback.index
         time.sleep(0.5)
-        assert layer.index == shown, "the timeline moved after Pause"
+        assert playback.index == shown, "the timeline moved after Pause"
         assert _wait_for(lambda: np.allclose(workbench.q, layer.result.q[shown])), "the robot is not at the shown sample"
         assert _changed(_settled(page), before) > CHANGED, "playing changed nothing on screen"
     finally:
-        layer.pause()
-        layer.speed.value = 1.0
-        layer.seek(0)
+        playback.pause()
+        playback.speed.value = 1.0
+        playback.seek(0)
 
 
 def _scene(page: Page) -> np.ndarray:
@@ -200,6 +208,7 @@ def _scene(page: Page) -> np.ndarray:
 
 def test_exported_html_animates(page: Page, layer: MotionLayer, browser: Browser, tmp_path: Path) -> None:
     """"Export animation" downloads one HTML page that plays the motion offline: once drawn, its 3-D view keeps changing."""
+    _tab(page, "Playback")
     with page.expect_download(timeout=180_000) as download:
         page.get_by_role("button", name="Export animation").click()
     out = tmp_path / "motion.html"
@@ -221,6 +230,7 @@ def test_exported_html_animates(page: Page, layer: MotionLayer, browser: Browser
 @pytest.mark.parametrize("label", ["JSON", "CSV"])
 def test_trajectory_downloads_hold_the_saved_samples(page: Page, layer: MotionLayer, tmp_path: Path, label: str) -> None:
     """The Trajectory buttons download the motion: the JSON's positions, the CSV's position columns are motion.npz's q."""
+    _tab(page, "Playback")
     with page.expect_download(timeout=60_000) as download:
         page.get_by_role("button", name=label, exact=True).click()
     out = tmp_path / download.value.suggested_filename
@@ -237,11 +247,12 @@ def test_trajectory_downloads_hold_the_saved_samples(page: Page, layer: MotionLa
 
 def test_playback_stops_when_the_layer_is_removed(workbench: Workbench, layer: MotionLayer) -> None:
     """Redrawing the session replaces the layer: its playback thread ends and leaves the robot alone."""
-    job = layer.play()
-    assert job is not None and _wait_for(lambda: layer.index > 0), "the playback did not start"
+    playback = layer.playback
+    job = playback.play()
+    assert job is not None and _wait_for(lambda: playback.index > 0), "the playback did not start"
     workbench.show_session(workbench.session)
     job.join(10)
-    assert not job.is_alive() and not layer.playing, "the playback outlived its layer"
+    assert not job.is_alive() and not playback.playing, "the playback outlived its layer"
     q = workbench.q.copy()
     time.sleep(0.5)
     assert np.array_equal(workbench.q, q) and workbench.session_layers.layers["motion"] is not layer

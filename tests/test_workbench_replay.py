@@ -86,7 +86,7 @@ def _show_everything(wb: Workbench) -> int:
                 shown += 1
         elif name == "motion":
             for i in np.linspace(0, len(result.t) - 1, 20).astype(int):
-                layer.show(int(i))
+                layer.playback.show(int(i))
                 shown += 1
     return shown
 

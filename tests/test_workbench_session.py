@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page
-from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _free_port, _settled, _until_changed, _view, _wait_for
+from test_workbench_browser import CHANGED, EXAMPLE, VIEWPORT, _free_port, _settled, _tab, _until_changed, _view, _wait_for
 
 from planner.core.errors import RegraspError
 from planner.core.paths import DEFAULT_TASK
@@ -78,7 +78,9 @@ def test_regrasp_replay_draws_the_saved_results(browser: Browser, example: Sessi
                 time.sleep(0.5)
         page.get_by_text("Collisions:").wait_for(timeout=60_000)
         picking = example.result("arms").picking_arm
+        _tab(page, "Steps")
         page.get_by_text(f"picking_arm={picking}").wait_for(timeout=10_000)
+        _tab(page, "View")
         with_layers = _settled(page)
         page.get_by_label("Show step results").click()
         assert _until_changed(page, with_layers) > CHANGED, "hiding the saved step results changed nothing on screen"
@@ -94,9 +96,8 @@ def test_robot_goes_to_a_witness_configuration(workbench: Workbench, page: Page,
     for layer in layers:  # the robot alone in view: the step layers' drawings (the motion's routes) cover parts of it
         layer.visible = False
     before = _settled(page)
-    panel = workbench.session_panel
-    label = next(o for o in panel.robot_at.options if "q_pick" in o)
-    panel.robot_at.value = label
+    label = next(o for o in workbench.pose_choice.dropdown.options if "q_pick" in o)
+    workbench.pose_choice.dropdown.value = label
     try:
         assert _wait_for(lambda: np.allclose(workbench.q, example.result("arms").q_pick))
         assert _until_changed(page, before) > CHANGED, "posing the robot at q_pick changed nothing on screen"
@@ -108,6 +109,7 @@ def test_robot_goes_to_a_witness_configuration(workbench: Workbench, page: Page,
 
 @pytest.mark.browser
 def test_export_button_downloads_what_is_shown(page: Page) -> None:
+    _tab(page, "Task")
     with page.expect_download(timeout=120_000) as download:  # the example's motion is recorded frame by frame
         page.get_by_role("button", name="Export HTML").click(timeout=120_000)
     html = Path(download.value.path()).read_text()
@@ -120,6 +122,7 @@ def test_bad_session_shows_its_error_and_the_workbench_stays_usable(workbench: W
     panel = workbench.session_panel
     shown = workbench.session
     panel.saved.value = "broken"
+    _tab(page, "Task")
     # the click is done when the button is pressed: waiting for "scheduled navigations" after it (there are none) stalled
     # 30 s in CI while software WebGL rendered the session; what the click does is waited for below. Pressing it can
     # itself wait over 30 s for the page's busy main thread on a loaded 2-core machine (seen with the full suite running)
@@ -143,6 +146,7 @@ def test_save_never_overwrites_without_confirmation(workbench: Workbench, page: 
     panel = workbench.session_panel
     panel.name.value = "taken"  # no load is still going: the test before waits for its end
     dialog = page.get_by_text("Overwrite sessions/taken?")
+    _tab(page, "Task")
     page.get_by_role("button", name="Save", exact=True).click()
     dialog.wait_for(timeout=60_000)  # software rendering under a loaded CI machine can be slow to draw the modal
     page.get_by_role("button", name="Cancel").click()

@@ -16,35 +16,30 @@ import viser
 from planner.collision.checker import CollisionChecker, build_collision_model
 from planner.core.errors import RegraspError
 from planner.core.forked import sigterm_unwinds
-from planner.core.paths import DEFAULT_TASK, PROJECT_ROOT, TASKS_DIR
+from planner.core.paths import DEFAULT_TASK
 from planner.core.plain_text import plain
-from planner.core.session import MANIFEST, Session
+from planner.core.session import Session
 from planner.model.task import Scene, load_task
 
 from .client_guard import ClientGuard
 from .collision_layer import CollisionLayer
 from .layer_toggles import LayerToggles
 from .notify import error_text
+from .pose_choice import INITIAL, MOVED, OTHER, PoseChoice
 from .robot_layer import RobotLayer
 from .scene_layer import SceneLayer
 from .serving_port import start_server
 from .session_layers import SessionLayers
-from .session_panel import INITIAL, MOVED, OTHER, SessionPanel
+from .session_panel import SessionPanel
 from .session_store import SESSIONS_DIR
+from .tabs import PanelTabs
+from .task_editor import TaskEditor
+from .task_tab import TaskTab
 from .view import CAMERA_LOOK_AT, CAMERA_POSITION, close_up, move_cameras, setup_view
 
 MAX_LISTED_PAIRS = 8
 VIEWS = ("overview", "start", "handover", "goal")  # camera buttons: the scene, the object at its start, the exchange, its goal
 GRASP_CLOSE_UP = 0.6  # m from the object when a grasp is chosen
-
-
-def task_choices(current: Path) -> dict[str, Path]:
-    """Dropdown label -> file for the tasks in assets/tasks, plus the current task if it lives elsewhere."""
-    choices = {p.stem: p.resolve() for p in sorted(TASKS_DIR.glob("*.toml"))}
-    if current.resolve() not in choices.values():
-        label = f"session {current.parent.name}" if current.name == MANIFEST else str(current)  # a replayed session's task
-        choices[label] = current.resolve()
-    return choices
 
 
 class Workbench:
@@ -58,7 +53,6 @@ class Workbench:
         self.host = host
         self.server = start_server(host, port)
         self.guard = ClientGuard(self.server, host)
-        self.task_roots = (PROJECT_ROOT, scene.source.resolve().parent)  # where "Load file" may read task files
         self._lock = threading.RLock()
         self._generation = 0
         self.collision_ready = threading.Event()
@@ -75,7 +69,6 @@ class Workbench:
         self._dimmed = False
         self._grasp_focus: str | None = None  # the grasp list framed while dimmed
         self._slider_of: dict[int, viser.GuiSliderHandle] = {}
-        self._syncing_choices = False  # True while _show rewrites the task dropdown: its callbacks must not load a task
         self._posing = False  # True while pose_robot moves the sliders: their callbacks must not redraw joint by joint
         setup_view(self.server)
         self._build_gui(sessions_dir)
@@ -86,37 +79,40 @@ class Workbench:
         """Where a browser finds the workbench."""
         return f"http://{self.host}:{self.server.get_port()}"
 
-    def close(self) -> None:
-        """Stop the server and the workers of a run still going; a collision model still being built is dropped."""
+    def close(self) -> str | None:
+        """Stop the server and the workers of a run still going; a collision model still being built is dropped. Returns
+        where unsaved steps were kept (sessions/<task>-unsaved-N), if there were any."""
         with self._lock:
             self._generation += 1
-        self.session_panel.close()
+        kept = self.session_panel.close()
+        self.task_editor.close()
         self.server.stop()
+        return kept
 
     def _build_gui(self, sessions_dir: Path) -> None:
-        """The panel: task choice, view toggles, the session, joint sliders of one part, collision status."""
+        """The panel: the tabs (task, steps, playback, joints, view), and the collision status below them."""
         gui = self.server.gui
-        with gui.add_folder("Task"):
-            self._task_files = task_choices(self.scene.source)
-            self.task_choice = gui.add_dropdown("Task", tuple(self._task_files), initial_value=self._label_of(self.scene.source))
-            self.task_path = gui.add_text("Task file", str(self.scene.source))
-            self.load_button = gui.add_button("Load file")
-            self.task_info = gui.add_markdown("")
-            self.task_error = gui.add_markdown("", visible=False)
-        with gui.add_folder("View"):
+        self.tabs = PanelTabs(gui)
+        with self.tabs.task:
+            self.task_tab = TaskTab(gui, self.scene)
+        self.task_editor = TaskEditor(self, self.tabs.task)  # its folder comes after the task's controls
+        with self.tabs.view:
+            self.views = gui.add_button_group("Camera", VIEWS)
             self.show_robot = gui.add_checkbox("Show robot", True)
             self.show_collision = gui.add_checkbox("Show collision geometry", False)
             self.show_steps = gui.add_checkbox("Show step results", True, hint="Every step layer at once (see Layers)")
-            self.views = gui.add_button_group("Camera", VIEWS)
-        self.layers_folder = gui.add_folder("Layers")
-        self.session_panel = SessionPanel(self, sessions_dir)
-        with gui.add_folder("Joints") as self._joints:
+            self.layers_folder = gui.add_folder("Layers")
+        with self.tabs.joints:
+            self.pose_choice = PoseChoice(gui, self.pose_robot, order=0.5)
             parts = self.scene.robot.part_names()
-            self.part = gui.add_dropdown("Part", tuple(parts), initial_value=next((p for p in parts if p != "torso"), parts[0]), order=1.0)
+            self.part = gui.add_dropdown("Part", tuple(parts), initial_value=next((p for p in parts if p != "torso"), parts[0]),
+                                         order=1.0)
             self.reset_button = gui.add_button("Reset", order=3.0, hint="Back to the task's initial configuration")
+        self.session_panel = SessionPanel(self, sessions_dir)
         self.collision_status = gui.add_markdown("")
-        self.task_choice.on_update(lambda e: None if self._syncing_choices else self._load(self._task_files[e.target.value], e.client))
-        self.load_button.on_click(lambda e: self._load(self.task_path.value, e.client))
+        task = self.task_tab
+        task.choice.on_update(lambda e: None if task.syncing else self._load(task.chosen(), e.client))
+        task.load_button.on_click(lambda e: self._load(task.path.value, e.client))
         self.show_robot.on_update(lambda e: self._set_robot_visible(e.target.value))
         self.show_collision.on_update(lambda e: self._set_collision_shown(e.target.value))
         self.show_steps.on_update(lambda e: self._set_steps_visible(e.target.value))
@@ -124,47 +120,39 @@ class Workbench:
         self.part.on_update(lambda _: self._rebuild_sliders())
         self.reset_button.on_click(lambda _: self.reset())
 
-    def _label_of(self, path: Path) -> str:
-        """The task dropdown's label for a task file."""
-        return next(label for label, p in self._task_files.items() if p == path.resolve())
-
-    def typed_task(self, text: str) -> Path:
-        """The task file typed in "Task file": a .toml file in the project or in the folder of the task the workbench
-        started with (a browser must not make the workbench read any file it likes)."""
-        path = Path(text.strip()).expanduser().resolve()
-        if path.suffix != ".toml" or not any(path.is_relative_to(root) for root in self.task_roots):
-            where = " or ".join(str(root) for root in dict.fromkeys(self.task_roots))
-            raise RegraspError(f"Task file: expected a .toml file in {where}, got {text.strip()!r:.200}")
-        return path
-
     def _load(self, chosen: Path | str, client: viser.ClientHandle | None) -> None:
-        """Load a task chosen in the GUI (a listed file, or the text typed in "Task file"); a bad file shows its error
-        and keeps the current task."""
+        """Load a task chosen in the GUI (a listed file, or the text typed in "Task file") once unsaved steps are dealt
+        with (asked in `client`'s tab); a bad file shows its error and keeps the current task."""
         try:
-            path = chosen if isinstance(chosen, Path) else self.typed_task(chosen)
+            path = chosen if isinstance(chosen, Path) else self.task_tab.typed(chosen)
         except RegraspError as exc:
-            self._refuse_task("Could not load the task", str(exc), client)
+            self.task_tab.refuse("Could not load the task", str(exc), client)
             return
         if path.resolve() == self.scene.source:
             return
         if self.session_panel.busy():  # the run would throw the new task away when it ends
-            self._refuse_task("Not loaded", "a step is running: wait for it to finish, then load the task", client)
+            self.task_tab.refuse("Not loaded", "a step is running: wait for it to finish, then load the task", client)
+            self.task_tab.choose(self.scene)
             return
-        self.task_error.visible = False
+        self.task_tab.error.visible = False
         try:
             scene = load_task(path)
         except Exception as exc:  # a bad file must never take the workbench down
-            self._refuse_task("Could not load the task", error_text(exc), client)
+            self.task_tab.refuse("Could not load the task", error_text(exc), client)
+            self.task_tab.choose(self.scene)
             return
-        self._show(scene)
-        self.session_panel.scratch = None  # the last task's unsaved steps kept (and said) now, not at the next run
+        self.replace_task(scene, client)
 
-    def _refuse_task(self, title: str, message: str, client: viser.ClientHandle | None) -> None:
-        """Say under the task (and to the asking tab) why the task shown stays."""
-        self.task_error.content = f"**{title}:** {plain(message)}"
-        self.task_error.visible = True
-        if client is not None:
-            client.add_notification(title, message, color="red", auto_close_seconds=10.0)
+    def replace_task(self, scene: Scene, client: viser.ClientHandle | None = None) -> None:
+        """Show `scene` instead of the current task (and session): the unsaved steps of the current one are first saved,
+        kept or discarded as the person answers in `client`'s tab (kept as sessions/<task>-unsaved-N without a client)."""
+
+        def replace() -> None:
+            self._show(scene)
+            self.session_panel.scratch = None  # the last task's unsaved steps kept (and said) now, not at the next run
+
+        self.session_panel.ask_unsaved(client, f"load the task {scene.name}", replace,
+                                       cancelled=lambda: self.task_tab.choose(self.scene))
 
     def show_session(self, session: Session) -> None:
         """Draw a session: its step layers, and its scene too when it is not the one shown."""
@@ -182,7 +170,8 @@ class Workbench:
         if self.layer_toggles is not None:
             self.layer_toggles.remove()
         self.session = session
-        self.session_layers = SessionLayers(self.server, session, workbench=self) if session is not None else None
+        with self.session_panel.step_controls:  # each layer's folder sits under the step table, shown when in focus
+            self.session_layers = SessionLayers(self.server, session, workbench=self) if session is not None else None
         self.layer_toggles = None
         if self.session_layers is not None:
             self.session_layers.visible = self.show_steps.value
@@ -191,11 +180,14 @@ class Workbench:
         self.session_panel.shown(session, self.session_layers)
 
     def focus_step(self, step: str) -> None:
-        """Show only the layer of `step` (the others hidden, nothing dimmed)."""
+        """Show only the layer of `step` (the others hidden, nothing dimmed), and only its controls in the Steps tab."""
         with self._lock:
             self.dim(False)
             if self.layer_toggles is not None:
                 self.layer_toggles.focus(step)
+            for name, layer in self.session_layers.layers.items() if self.session_layers is not None else ():
+                if layer.folder is not None:
+                    layer.folder.visible = name == step
 
     def focus_grasp(self, step: str, object_pose: np.ndarray) -> None:
         """A grasp chosen in the layer of `step`: that layer alone, the robot and obstacles dimmed, the object framed (once:
@@ -261,22 +253,12 @@ class Workbench:
             self.scene_layer = SceneLayer(self.server, scene)
             self.robot_layer = RobotLayer(self.server, scene.robot, self.q)
             self.robot_layer.visible = self.show_robot.value
-            self._task_files = task_choices(scene.source)
-            self._syncing_choices = True  # viser calls on_update synchronously, within this block
-            try:
-                self.task_choice.options = tuple(self._task_files)
-                self.task_choice.value = self._label_of(scene.source)
-            finally:
-                self._syncing_choices = False
-            # a replayed session's task file is its session.json: show the task it came from (a name or a relative path)
-            self.task_path.value = session.manifest.get("task_source", "") if session is not None and scene is session.scene \
-                else str(scene.source)
-            about = f" — {plain(scene.description)}" if scene.description else ""
-            self.task_info.content = f"**{plain(scene.name)}**{about}"
+            self.task_tab.show(scene, session)
             self.part.options = tuple(scene.robot.part_names())
             self._rebuild_sliders()
             self.collision_status.content = "*Collisions: building the collision model…*"
             self._draw_session(session)
+            self.task_editor.shown(scene)
             threading.Thread(target=self._build_collisions, args=(scene, self._generation), daemon=True).start()
 
     def _build_collisions(self, scene: Scene, generation: int) -> None:
@@ -303,7 +285,7 @@ class Workbench:
             if self._sliders is not None:
                 self._sliders.remove()
             robot, names = self.scene.robot, self.scene.robot.joint_names()
-            with self._joints:
+            with self.tabs.joints:
                 self._sliders = self.server.gui.add_folder(None, order=2.0)
             with self._sliders:
                 self._slider_of = {
@@ -326,7 +308,7 @@ class Workbench:
                 slider.value = value  # its callback comes back here with the same value
                 return
             self.q[index] = value
-            self.session_panel.showing(MOVED)
+            self.pose_choice.showing(MOVED)
             self._refresh()
 
     def reset(self) -> None:
@@ -347,7 +329,7 @@ class Workbench:
                 self._posing = False
             if object_pose is not None and self.scene_layer is not None:
                 self.scene_layer.place_object(object_pose)
-            self.session_panel.showing(label)
+            self.pose_choice.showing(label)
             self._refresh()
 
     def _set_robot_visible(self, visible: bool) -> None:
@@ -391,4 +373,6 @@ def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 808
     except KeyboardInterrupt:
         pass
     finally:
-        workbench.close()
+        kept = workbench.close()
+        if kept is not None:
+            print(f"regrasp workbench: {kept}", file=sys.stderr, flush=True)

@@ -1,6 +1,7 @@
 """The workbench's WebSocket trusts no client: pages of foreign origins are refused, and a GUI change is acted on only
 when a person could have made it in the page (a listed option, an enabled control, a value of the control's type and
-range); the rest is logged in one line and dropped before viser applies it.
+range); the rest is logged in one line and dropped before viser applies it. An upload larger than the workbench takes
+is refused by its declared size before any of its bytes is kept, and a part beyond the declared size is dropped.
 
 viser 1.1 has no option for either, so the guard sits in front of its WebSocket server's dispatch of incoming
 messages (every GUI change passes there before it reaches a handle) and checks each connection's handshake request
@@ -20,12 +21,15 @@ import viser
 from viser import _messages
 from viser.infra import WebsockClientConnection
 
+from .mesh_upload import too_large
+
 log = logging.getLogger("regrasp.workbench")
 
 MAX_TEXT = 4096  # characters a text field takes from a client
 REFUSED = (_messages.ShareUrlRequest, _messages.ShareUrlDisconnect)  # the workbench offers no public share link
 LOOPBACK = {"localhost", "127.0.0.1", "::1"}
 ANY_INTERFACE = {"0.0.0.0", "::", ""}
+MIN_PART_BYTES = 1024  # an upload's parts average at least this (viser's page sends 512 KiB parts): caps the part count
 Dispatch = Callable[[int, _messages.Message], Coroutine[Any, Any, None]]
 
 
@@ -85,6 +89,8 @@ class ClientGuard:
 
     def __init__(self, server: viser.ViserServer, bound: str):
         self.bound = bound
+        self._server = server
+        self._uploads: dict[str, list[int]] = {}  # transfer id -> [client id, declared bytes, bytes received]
         self._inputs: dict[str, Any] = server.gui._gui_input_handle_from_uuid  # viser's own uuid -> handle map
         self._refused: set[int] = set()
         websock = server._websock_server
@@ -92,7 +98,12 @@ class ClientGuard:
         self._dispatch: Dispatch = websock._handle_incoming_message
         websock._handle_incoming_message = self._guarded  # every message of every client passes here first
         websock.on_client_connect(self._check_origin)
-        websock.on_client_disconnect(lambda conn: self._refused.discard(conn.client_id))
+        websock.on_client_disconnect(self._forget)
+
+    def _forget(self, conn: WebsockClientConnection) -> None:
+        self._refused.discard(conn.client_id)
+        for transfer in [t for t, (owner, _, _) in self._uploads.items() if owner == conn.client_id]:
+            del self._uploads[transfer]
 
     async def _check_origin(self, conn: WebsockClientConnection) -> None:
         connection = self._live.get(conn.client_id)
@@ -115,4 +126,32 @@ class ClientGuard:
             if problem is not None:
                 log.warning("workbench: ignored a change of %r from client %d: %s", handle.label, client_id, problem)
                 return
+        if isinstance(message, (_messages.FileTransferStartUpload, _messages.FileTransferPart)) and \
+                not self._upload_allowed(client_id, message):
+            return
         await self._dispatch(client_id, message)
+
+    def _upload_allowed(self, client_id: int, message: _messages.FileTransferStartUpload | _messages.FileTransferPart) -> bool:
+        """An upload's start within the size limit (else the tab is told why), and its parts within the declared size."""
+        if isinstance(message, _messages.FileTransferStartUpload):
+            size, parts = message.size_bytes, message.part_count
+            problem = too_large(size) if isinstance(size, int) and size >= 0 else f"declares {size!r:.40} bytes"
+            if problem is None and not (isinstance(parts, int) and 0 <= parts <= 1 + size // MIN_PART_BYTES):
+                problem = f"declares {parts!r:.40} parts for {size} bytes"
+            if problem is not None:
+                log.warning("workbench: refused the upload of %r from client %d: %s", str(message.filename)[:80], client_id, problem)
+                client = self._server.get_clients().get(client_id)
+                if client is not None:
+                    client.add_notification("Upload refused", f"{str(message.filename)[:80]} {problem}", color="red",
+                                            auto_close_seconds=10.0)
+                return False
+            if size > 0:
+                self._uploads[message.transfer_uuid] = [client_id, size, 0]
+            return True
+        state = self._uploads.get(message.transfer_uuid)
+        if state is None or state[0] != client_id:
+            return False
+        state[2] += len(message.content)
+        if state[2] >= state[1]:
+            del self._uploads[message.transfer_uuid]
+        return state[2] <= state[1]

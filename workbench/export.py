@@ -46,13 +46,15 @@ def motion_html(server: viser.ViserServer, robot: RobotLayer, motion: MotionLaye
     r = motion.result
     assert r is not None
     samples = frame_samples(r.t)
+    playback = motion.playback
+    assert r is not None and playback is not None
     robot.update(r.q[samples[0]])
-    motion.show(int(samples[0]))
+    playback.show(int(samples[0]))
     serializer = server.get_scene_serializer()
     for prev, i in itertools.pairwise(samples):
         serializer.insert_sleep(float(r.t[i] - r.t[prev]))
         robot.update(r.q[i])
-        motion.show(int(i))
+        playback.show(int(i))
     return serializer.as_html()
 
 

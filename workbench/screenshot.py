@@ -1,4 +1,5 @@
-"""A picture of the workbench replaying a session, taken with headless Debian chromium (the README's image)."""
+"""A picture of the workbench replaying a session, taken with headless Debian chromium (the README's image): the
+Playback tab open and the robot mid-motion, at the handover (or, for a session without a motion, posed at its exchange)."""
 from __future__ import annotations
 
 import io
@@ -17,6 +18,8 @@ from .view import close_up, move_cameras
 if TYPE_CHECKING:
     from playwright.sync_api import Browser, Page
 
+    from .app import Workbench
+
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
     "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
@@ -27,7 +30,8 @@ VIEWPORT = {"width": 1600, "height": 1000}
 COLORS = 160  # the PNG's palette: keeps the picture under MAX_BYTES
 MAX_BYTES = 300_000
 SETTLE_SECONDS = 60.0
-POSE = "double grasps: pair 1 at exchange (q_exch)"  # the robot handing the object over, if the session has it
+POSE = "double grasps: pair 1 at exchange (q_exch)"  # without a motion: the robot handing the object over, if the session has it
+MID_MOTION = "q_exch"  # the motion's keyframe shown: the robot handing the object over
 DISTANCE = 1.7  # m from the exchange: the robot, the desk and both placements in view
 
 
@@ -51,6 +55,21 @@ def _settled_png(page: Page, timeout: float = SETTLE_SECONDS) -> bytes:
     raise RegraspError(f"the workbench never finished drawing within {timeout:.0f} s")
 
 
+def _mid_motion(wb: Workbench, page: Page) -> None:
+    """Open the Playback tab with the motion at its handover keyframe, the other step layers hidden; a session without
+    a motion shows the robot at its exchange instead."""
+    from .layers.motion import MotionLayer
+    from .playback import KEYFRAMES
+
+    motion = wb.session_layers.layers.get("motion") if wb.session_layers is not None else None
+    if isinstance(motion, MotionLayer) and motion.playback is not None:
+        wb.session_panel.step.value = "motion"  # its layer alone in view
+        page.get_by_role("tab", name="Playback").click()
+        motion.playback.seek(int(motion.result.keyframes[KEYFRAMES.index(MID_MOTION)]))
+    elif POSE in wb.pose_choice.dropdown.options:
+        wb.pose_choice.dropdown.value = POSE
+
+
 def screenshot(session: Path, out: Path, browser: Browser | None = None) -> int:
     """Replay `session` in a workbench, the robot at the exchange, photograph it in chromium into `out` (PNG); returns its
     bytes. Without `browser`, headless Debian chromium is started for it."""
@@ -69,8 +88,6 @@ def screenshot(session: Path, out: Path, browser: Browser | None = None) -> int:
                 started.close()
     wb = Workbench(None, "127.0.0.1", free_port(), session=session)
     try:
-        if POSE in wb.session_panel.robot_at.options:
-            wb.session_panel.robot_at.value = POSE
         page = browser.new_page(viewport=VIEWPORT)
         try:
             page.goto(wb.url)
@@ -78,6 +95,7 @@ def screenshot(session: Path, out: Path, browser: Browser | None = None) -> int:
             wb.collision_ready.wait(60)
             for close in page.locator(".mantine-Notification-closeButton").all():  # e.g. "software WebGL": not the workbench's
                 close.click()
+            _mid_motion(wb, page)
             point = wb.exchange_point()
             if point is not None:
                 for job in move_cameras(wb.server, *close_up(point, DISTANCE), seconds=0.1):

@@ -20,15 +20,17 @@ from planner.core.bounds import SEED, seed_problem
 from planner.core.errors import RegraspError
 from planner.core.forked import stop_pools
 from planner.core.plain_text import plain
-from planner.core.runner import ProgressFactory, run_pipeline
+from planner.core.runner import run_pipeline
 from planner.core.session import Session
-from planner.core.steps import Progress, Step
 from planner.pipeline import PIPELINE, step_named, steps_until
 
 from .export import scene_html
 from .layers.base import Pose
 from .notify import error_text, notify_all
 from .param_inputs import ParamInputs, recorded_params, whole
+from .pose_choice import INITIAL, OTHER
+from .run_progress import progress_factory
+from .session_dialogs import CANCEL, DISCARD, SAVE, ask_unsaved, confirm_overwrite
 from .session_layers import SessionLayers
 from .session_store import (
     check_name,
@@ -38,15 +40,14 @@ from .session_store import (
     save_copy,
     scratch_copy,
     scratch_folder,
+    unsaved_name,
+    unsaved_steps,
 )
 from .step_table import step_details, step_table
 
 if TYPE_CHECKING:
     from .app import Workbench
 
-INITIAL = "task: initial configuration"
-MOVED = "joints moved by hand"
-OTHER = "another configuration"
 NO_SESSIONS = "(no saved sessions)"
 NO_STEP = "(no step has run)"
 JOIN_SECONDS = 10.0  # how long closing waits for a stopped run to end before deleting its scratch session
@@ -62,41 +63,39 @@ class SessionPanel:
         self._starting = threading.Lock()  # makes "is a run going? then start one" one step
         self._scratch: Path | None = None  # the session folder the GUI created; the only one runs write into
         self._saved_records: list | None = None  # the scratch session's step records when it was last saved
-        self._poses: dict[str, Pose] = {}
-        self._syncing_robot_at = False  # True while `showing` rewrites "Robot at": its callback must not pose the robot
         self._params: ParamInputs | None = None
         gui = workbench.server.gui
         names = tuple(s.name for s in PIPELINE)
-        with gui.add_folder("Session"):
-            self.message = gui.add_markdown("", visible=False)
-            self.table = gui.add_markdown(step_table(None))
-            self.step = gui.add_dropdown("Step", (NO_STEP,), hint="A finished step: its layer alone in view, its details below")
-            with gui.add_folder("Step details", expand_by_default=False):
-                self.details = gui.add_markdown("")
-            self.robot_at = gui.add_dropdown("Robot at", (INITIAL,), hint="The robot and the object as a step found them; "
-                                             "says what is shown")
+        with workbench.tabs.task, gui.add_folder("Session"):
             self.name = gui.add_text("Name", "untitled")
             self.save_button = gui.add_button("Save", hint="Save the current session as sessions/<name>")
             self.saved = gui.add_dropdown("Saved", self._saved_options())
             self.load_button = gui.add_button("Load", hint="Replay a saved session: nothing is recomputed")
-            self.seed = gui.add_number("Seed", 0, min=SEED.low, step=1, hint=f"The seed of a session started here ({SEED.describe()})")
+            self.export_button = gui.add_button("Export HTML", hint="Download what is shown as one HTML file that plays offline")
+        with workbench.tabs.steps:
+            self.message = gui.add_markdown("", visible=False)
+            self.table = gui.add_markdown(step_table(None))
             self.next_button = gui.add_button("Run the next step")
             self.until = gui.add_dropdown("Up to", names, initial_value=names[-1])
             self.until_button = gui.add_button("Run up to this step")
+            self.seed = gui.add_number("Seed", 0, min=SEED.low, step=1, hint=f"The seed of a session started here ({SEED.describe()})")
             self.progress = gui.add_progress_bar(0.0, visible=False)
             self.progress_text = gui.add_markdown("", visible=False)
+            self.step = gui.add_dropdown("Step", (NO_STEP,), hint="The step in focus: its layer alone in view, its controls "
+                                         "and details below")
+            self.step_controls = gui.add_folder(None)  # the layer of the step in focus puts its folder here
+            with gui.add_folder("Step details", expand_by_default=False):
+                self.details = gui.add_markdown("")
             with gui.add_folder("Re-run from here", expand_by_default=False):
                 self.rerun_step = gui.add_dropdown("Step", names)
                 self._params_folder = gui.add_folder("Parameters")
                 self.rerun_button = gui.add_button("Re-run into a new session")
-            self.export_button = gui.add_button("Export HTML", hint="Download what is shown as one HTML file that plays offline")
         # disabled while a run goes, the task's "Load file" and choice included (a task loaded meanwhile would be thrown away)
         self._buttons = (self.save_button, self.load_button, self.next_button, self.until_button, self.rerun_button,
-                         workbench.load_button, workbench.task_choice)
-        self.robot_at.on_update(lambda e: self._pose_chosen(e.target.value))
+                         workbench.task_tab.load_button, workbench.task_tab.choice)
         self.step.on_update(lambda e: self._step_chosen(e.target.value))
         self.save_button.on_click(lambda e: self._save_clicked(e.client))
-        self.load_button.on_click(lambda _: self._load_clicked())
+        self.load_button.on_click(lambda e: self._load_clicked(e.client))
         self.next_button.on_click(lambda _: self.run_next())
         self.until_button.on_click(lambda _: self.run_until(self.until.value))
         self.rerun_step.on_update(lambda _: self._rebuild_params())
@@ -117,15 +116,10 @@ class SessionPanel:
         self._step_chosen(self.step.value)
         self.saved.options = self._saved_options()
         scene = self.wb.scene
-        self._poses = {INITIAL: Pose(scene.q_initial, scene.object_initial), **(layers.poses() if layers is not None else {})}
+        poses = {INITIAL: Pose(scene.q_initial, scene.object_initial), **(layers.poses() if layers is not None else {})}
         for name, message in (layers.errors if layers is not None else {}).items():
             self._say(f"Could not draw {name}", message, error=True)
-        self._syncing_robot_at = True  # new options must not move the robot: a run keeps it where it was
-        try:
-            self.robot_at.options = tuple(self._poses)
-        finally:
-            self._syncing_robot_at = False
-        self.showing(INITIAL if np.array_equal(self.wb.q, scene.q_initial) else OTHER)
+        self.wb.pose_choice.offer(poses, INITIAL if np.array_equal(self.wb.q, scene.q_initial) else OTHER)
         if session is not None and session.folder != self._scratch:
             self.name.value = session.folder.name
         self._rebuild_params()
@@ -149,23 +143,6 @@ class SessionPanel:
         self.details.content = step_details(session, name)
         self.wb.focus_step(name)
 
-    def _pose_chosen(self, label: str) -> None:
-        if label in self._poses and not self._syncing_robot_at:
-            pose = self._poses[label]
-            self.wb.pose_robot(pose.q, pose.object_pose, label)
-
-    def showing(self, label: str) -> None:
-        """Make "Robot at" say what the robot is shown at (a label it does not offer yet is added)."""
-        if self.robot_at.value == label:
-            return
-        self._syncing_robot_at = True
-        try:
-            if label not in self.robot_at.options:
-                self.robot_at.options = (*self._poses, label)
-            self.robot_at.value = label
-        finally:
-            self._syncing_robot_at = False
-
     def _rebuild_params(self) -> None:
         """Inputs for the chosen step's parameters, starting at the values the current session used."""
         if self._params is not None:
@@ -177,11 +154,46 @@ class SessionPanel:
 
     # -- load and save ---------------------------------------------------------------------------
 
-    def _load_clicked(self) -> None:
+    def _load_clicked(self, client: viser.ClientHandle | None) -> None:
         if self.saved.value == NO_SESSIONS:
             self._say("Nothing to load", f"{self.sessions_dir} holds no sessions yet", error=True)
         else:
-            self.load(self.sessions_dir / self.saved.value)
+            folder = self.sessions_dir / self.saved.value
+            self.ask_unsaved(client, f"load the session {folder.name}", lambda: self.load(folder))
+
+    def unsaved_steps(self) -> list[str]:
+        """The steps of the scratch session shown that are not saved as they are (none when no scratch session is shown)."""
+        session = self.wb.session
+        return unsaved_steps(session.records, self._saved_records) if session is not None and session.folder == self._scratch else []
+
+    def ask_unsaved(self, client: viser.ClientHandle | None, what: str, proceed: Callable[[], Any],
+                    cancelled: Callable[[], None] | None = None) -> None:
+        """Run `proceed` (which replaces the shown session) once unsaved steps are dealt with: with steps unsaved and a
+        `client`, its tab is asked to save, keep (as sessions/<task>-unsaved-N), discard or cancel (`cancelled` runs);
+        without a client they are kept, as closing keeps them."""
+        steps = self.unsaved_steps()
+        if client is None or not steps:
+            proceed()
+            return
+        name = self.name.value.strip()
+
+        def answer(choice: str) -> None:
+            if choice == CANCEL or self._refuse_while_busy():
+                if cancelled is not None:
+                    cancelled()
+                return
+            if choice == SAVE:
+                try:
+                    self.save(name)
+                except Exception as exc:  # e.g. the name is taken: said, and nothing is replaced
+                    self._say("Not saved", error_text(exc), error=True)
+                    if cancelled is not None:
+                        cancelled()
+                    return
+            elif choice == DISCARD and self.wb.session is not None:
+                self._saved_records = self.wb.session.records  # nothing left to keep: the scratch session just goes
+            proceed()
+        ask_unsaved(client, steps, what, name, unsaved_name(self.sessions_dir, self.wb.scene), answer)
 
     def load(self, folder: Path) -> bool:
         """Replay a saved session; a bad one shows its error and leaves the workbench as it was."""
@@ -216,7 +228,7 @@ class SessionPanel:
             name = check_name(self.name.value)
             if self.wb.session is not None and (self.sessions_dir / name).exists():
                 self._say("Not saved", f"sessions/{name} already exists: confirm in the dialog to overwrite it")
-                self._confirm_overwrite(client, name)
+                confirm_overwrite(client, self.sessions_dir / name, lambda: self._save_reporting(name, overwrite=True))
                 return
             self._save_reporting(name, overwrite=False)
         except Exception as exc:  # a message in the GUI, never an exception in the callback
@@ -229,20 +241,6 @@ class SessionPanel:
             self._say("Not saved", error_text(exc), error=True)
             return
         self._say("Saved", f"the session is in {saved.folder}")
-
-    def _confirm_overwrite(self, client: viser.ClientHandle, name: str) -> None:
-        """A dialog on the asking tab: overwrite sessions/<name>, or cancel."""
-        with client.gui.add_modal(f"Overwrite sessions/{name}?") as modal:
-            client.gui.add_markdown(f"*{plain(self.sessions_dir / name)}* already exists. Replace it with the current session?")
-            overwrite = client.gui.add_button("Overwrite", color="red")
-            cancel = client.gui.add_button("Cancel")
-
-        def confirmed(_: Any) -> None:
-            modal.close()
-            self._save_reporting(name, overwrite=True)
-
-        overwrite.on_click(confirmed)
-        cancel.on_click(lambda _: modal.close())
 
     # -- runs ------------------------------------------------------------------------------------
 
@@ -266,7 +264,7 @@ class SessionPanel:
         def work() -> None:
             session = self._working_session()
             try:
-                run_pipeline(session, until, None, self._progress_factory(todo))
+                run_pipeline(session, until, None, progress_factory(self.progress, self.progress_text, todo))
             finally:
                 self.wb.show_session(session)
         return self._start(work)
@@ -295,7 +293,7 @@ class SessionPanel:
             new = session.branch(target, before=step)
             todo = [s for s in steps_until(until) if s.name not in new.finished()]
             try:
-                run_pipeline(new, until, params, self._progress_factory(todo))
+                run_pipeline(new, until, params, progress_factory(self.progress, self.progress_text, todo))
             finally:
                 self.wb.show_session(new)
                 self.scratch = None
@@ -328,33 +326,28 @@ class SessionPanel:
     def scratch(self, folder: Path | None) -> None:
         """Replace the scratch session; the one replaced is deleted once its unsaved steps are kept (`discard_scratch`)."""
         if self._scratch is not None and self._scratch != folder:
-            said = discard_scratch(self._scratch, self.sessions_dir, self._saved_records)
-            if said is not None:
-                self._say(*said)
-                self.saved.options = self._saved_options()
-            self._saved_records = None
+            self._drop_scratch()
         self._scratch = folder
 
-    def close(self) -> None:
-        """Stop a run still going (its workers), then delete the scratch session."""
+    def _drop_scratch(self) -> tuple[str, str, bool] | None:
+        """Delete the scratch session once its unsaved steps are kept; what was said about them, if anything."""
+        assert self._scratch is not None
+        said = discard_scratch(self._scratch, self.sessions_dir, self._saved_records)
+        if said is not None:
+            self._say(*said)
+            self.saved.options = self._saved_options()
+        self._scratch, self._saved_records = None, None
+        return said
+
+    def close(self) -> str | None:
+        """Stop a run still going (its workers), then delete the scratch session; where its unsaved steps were kept (or
+        why they could not be), if there were any."""
         job = self.job
         if job is not None and job.is_alive():
             stop_pools(job)
             job.join(JOIN_SECONDS)
-        self.scratch = None
-
-    def _progress_factory(self, todo: list[Step]) -> ProgressFactory:
-        """Per step, a callback moving the progress bar over this run's share of that step."""
-        names = [s.name for s in todo]
-
-        def factory(step: Step) -> Progress:
-            i = names.index(step.name)
-
-            def report(fraction: float, message: str = "") -> None:
-                self.progress.value = round(100 * (i + min(max(fraction, 0.0), 1.0)) / len(names), 1)
-                self.progress_text.content = f"*{step.name}* ({i + 1}/{len(names)}): {plain(message)}"
-            return report
-        return factory
+        said = self._drop_scratch() if self._scratch is not None else None
+        return f"{said[0]}: {said[1]}" if said is not None else None
 
     def _start(self, work: Callable[[], None]) -> threading.Thread | None:
         """Run `work` in a background thread with the run buttons disabled and the progress bar shown."""

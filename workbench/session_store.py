@@ -11,6 +11,7 @@ from planner.core.errors import RegraspError
 from planner.core.paths import PROJECT_ROOT, plain_name, temporary_folder
 from planner.core.results import writing
 from planner.core.session import Session
+from planner.model.task import Scene
 
 from .notify import error_text
 
@@ -52,18 +53,29 @@ def free_name(folder: Path, base: str, kind: str = "rerun") -> str:
     return f"{base}-{kind}-{n}"
 
 
+def unsaved_steps(records: list, saved: list | None) -> list[str]:
+    """The names of the step `records` not among the `saved` ones (the records when last saved) as they are."""
+    kept = {r["name"]: r for r in saved or []}
+    return [r["name"] for r in records if kept.get(r["name"]) != r]
+
+
 def keep_unsaved(folder: Path, sessions_dir: Path, saved: list | None) -> Path | None:
     """Copy a scratch session about to be deleted into `sessions_dir/<task>-unsaved-N` (listed with the saved sessions)
     when it has finished steps not saved as they are (`saved`: its step records when it was last saved); the copy's
     folder, or None when there was nothing to keep."""
     session = Session.open(folder)
-    if not session.records or session.records == saved:
+    if not unsaved_steps(session.records, saved):
         return None
+    return save_copy(session, sessions_dir / unsaved_name(sessions_dir, session.scene)).folder
+
+
+def unsaved_name(sessions_dir: Path, scene: Scene) -> str:
+    """The free `<task>-unsaved-N` name unsaved steps of a session of `scene` are kept under in `sessions_dir`."""
     try:
-        base = check_name(session.scene.name)
+        base = check_name(scene.name)
     except RegraspError:  # a task name that is no folder name
         base = "untitled"
-    return save_copy(session, sessions_dir / free_name(sessions_dir, base, "unsaved")).folder
+    return free_name(sessions_dir, base, "unsaved")
 
 
 def discard_scratch(folder: Path, sessions_dir: Path, saved: list | None) -> tuple[str, str, bool] | None:

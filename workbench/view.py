@@ -41,10 +41,10 @@ def _glide(client: viser.ClientHandle, position: np.ndarray, look_at: np.ndarray
     for k in range(1, MOVE_FRAMES + 1):
         s = k / MOVE_FRAMES
         s = s * s * (3 - 2 * s)  # smoothstep: starts and stops gently
-        with client.atomic():
+        with client.atomic():  # position first: viser's position setter shifts look_at along, which is then set
             camera.up_direction = (0.0, 0.0, 1.0)
-            camera.look_at = tuple(t0 + s * (look_at - t0))
             camera.position = tuple(p0 + s * (position - p0))
+            camera.look_at = tuple(t0 + s * (look_at - t0))
         time.sleep(seconds / MOVE_FRAMES)
 
 
@@ -56,3 +56,14 @@ def move_cameras(server: viser.ViserServer, position: np.ndarray, look_at: np.nd
     for job in jobs:
         job.start()
     return jobs
+
+
+def follow_cameras(server: viser.ViserServer, shift: np.ndarray) -> None:
+    """Move every connected client's camera, and the point it looks at, by `shift` (the camera follows something)."""
+    shift = np.asarray(shift, float)
+    for client in server.get_clients().values():
+        camera = client.camera
+        look_at = np.asarray(camera.look_at, float) + shift
+        with client.atomic():  # position first: viser's position setter shifts look_at along, which is then set
+            camera.position = tuple(np.asarray(camera.position, float) + shift)
+            camera.look_at = tuple(look_at)

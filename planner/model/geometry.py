@@ -15,3 +15,8 @@ def pose(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
 
 def se3(T: np.ndarray) -> pin.SE3:
     return pin.SE3(np.asarray(T[:3, :3], float), np.asarray(T[:3, 3], float))
+
+
+def heading(T: np.ndarray) -> float:
+    """The heading (rad) of a pose: the angle of its x axis about the vertical (the yaw of its roll-pitch-yaw)."""
+    return float(np.arctan2(T[1, 0], T[0, 0]))

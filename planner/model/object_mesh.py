@@ -126,12 +126,18 @@ def _checked_path(path: Path) -> str:
         raise InputError(path, None, "is a directory; expected a mesh file (.obj, .stl, .ply, .off or .glb)")
     if not path.is_file():
         raise InputError(path, None, "no such file; expected a mesh file (.obj, .stl, .ply, .off or .glb)")
+    file_type = mesh_format(path)
+    if path.stat().st_size == 0:
+        raise InputError(path, None, "is empty (0 bytes); expected a closed triangle mesh")
+    return file_type
+
+
+def mesh_format(path: Path) -> str:
+    """The trimesh file type of a mesh file's name (by its extension), or an InputError listing the formats read."""
     file_type = FORMATS.get(path.suffix.lower())
     if file_type is None:
         raise InputError(path, None, f"unsupported mesh format '{path.suffix or '(no extension)'}'; "
                                      "expected one of .obj, .stl, .ply, .off, .glb")
-    if path.stat().st_size == 0:
-        raise InputError(path, None, "is empty (0 bytes); expected a closed triangle mesh")
     return file_type
 
 

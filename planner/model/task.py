@@ -31,7 +31,9 @@ from planner.model.object_mesh import (
 )
 from planner.model.robot import Robot, load_robot
 
-BUILTIN_OBJECTS = {"statuette": ASSETS / "objects" / "statuette.obj"}
+ROBOTS_DIR = ASSETS / "robots"  # the robot specs the project ships; a task names one by its file name
+OBJECTS_DIR = ASSETS / "objects"  # where a task's mesh is looked for when it is not beside the task file
+BUILTIN_OBJECTS = {"statuette": OBJECTS_DIR / "statuette.obj"}
 MAX_OBSTACLES = 500  # more makes every collision check slow (check would run for minutes); merge small parts into meshes
 MAX_COORDINATE = 100.0  # m: a placement farther from the robot than this is a typo or a unit error
 MAX_ANGLE = 2 * np.pi + 1e-6  # rad: larger roll/pitch/yaw values are degrees given as radians
@@ -59,15 +61,20 @@ class Scene:
     handover: bool = False  # the task asks for a regrasp even when one arm reaches both placements
 
 
+def find_file(value: str, base: Path, search: Path) -> Path | None:
+    """The file or folder a task's field names: `value` beside the task file (in `base`), else in `search`; None if neither."""
+    return next((c.resolve() for c in (base / value, search / value) if c.exists()), None)
+
+
 def _path(tab: Table, key: str, base: Path, search: Path) -> Path:
     """The file a field names, beside the task file or in `search`; a directory is refused by name."""
     value = tab.str(key)
-    for candidate in (base / value, search / value):
-        if candidate.is_file():
-            return candidate.resolve()
-        if candidate.is_dir():
-            raise tab.error(key, f"'{value}' is a directory ({candidate.resolve()}); expected a file")
-    raise tab.error(key, f"file '{value}' not found (looked beside the task file and in {search})")
+    found = find_file(value, base, search)
+    if found is not None and found.is_dir():
+        raise tab.error(key, f"'{value}' is a directory ({found}); expected a file")
+    if found is None or not found.is_file():
+        raise tab.error(key, f"file '{value}' not found (looked beside the task file and in {search})")
+    return found
 
 
 def _pose(tab: Table) -> np.ndarray:
@@ -120,7 +127,7 @@ def _mesh(tab: Table, key: str, base: Path, meshes: dict[str, trimesh.Trimesh], 
         except InputError as exc:
             raise tab.error(key, f"the embedded {limits.what} mesh in {exc}") from exc
     elif name not in meshes:
-        path = BUILTIN_OBJECTS.get(value) or _path(tab, key, base, ASSETS / "objects")
+        path = BUILTIN_OBJECTS.get(value) or _path(tab, key, base, OBJECTS_DIR)
         try:
             meshes[name] = load_mesh(path, limits, _mesh_options(tab))
         except InputError as exc:
@@ -192,7 +199,7 @@ def scene_from_dict(data: dict[str, Any], source: Path, robot_path: Path | None 
     root = Table(data, source, field_prefix)
     root.check_keys({"name", "description", "robot", "object", "obstacles", "robot_initial", "robot_final", "handover"})
     base = source.parent
-    robot = load_robot(robot_path or _path(root, "robot", base, ASSETS / "robots"))
+    robot = load_robot(robot_path or _path(root, "robot", base, ROBOTS_DIR))
     meshes = dict(meshes or {})
     obj = root.table("object")
     obj.check_keys({"mesh", "initial", "final", "scale", "up"})

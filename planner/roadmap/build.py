@@ -76,14 +76,16 @@ def _vis_prm_job(dec: Decomposition, arm: str, seed: int, params: RoadmapParams)
 
 def _check_all(pool: Executor, qa: np.ndarray, qb: np.ndarray, subsets: list[str], workers: int,
                progress: Progress, message: str) -> tuple[np.ndarray, int]:
-    """Check segments qa[i] -> qb[i] (a configuration when qa[i] == qb[i]) in ordered chunks."""
+    """Check segments qa[i] -> qb[i] (a configuration when qa[i] == qb[i]) in ordered chunks; the progress message
+    counts the candidates checked of all and those kept so far."""
     if not len(qa):
         return np.zeros(0, dtype=bool), 0
     bounds = np.linspace(0, len(qa), min(len(qa), 16 * workers) + 1).astype(int)
     futures = [pool.submit(_segments_job, qa[a:b], qb[a:b], subsets[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+    kept = 0
     for k, f in enumerate(futures):
-        f.result()
-        progress((k + 1) / len(futures), message)
+        kept += int(f.result()[0].sum())
+        progress((k + 1) / len(futures), f"{message}: {bounds[k + 1]:,} of {len(qa):,} candidates checked, {kept:,} kept")
     results = [f.result() for f in futures]
     return np.concatenate([r[0] for r in results]), sum(r[1] for r in results)
 
@@ -127,7 +129,8 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
                 if uf.find(u) != uf.find(v) and seg.segment_free(node_q[u], node_q[v], s, ends=False):
                     keep[k] = uf.union(u, v)
                 if k % 200 == 0:
-                    progress(0.25 + 0.75 * k / len(cand), "Super Graph edges (tree)")
+                    progress(0.25 + 0.75 * k / len(cand), f"Super Graph edges (tree): {k:,} of {len(cand):,} candidates "
+                             f"checked, {int(keep.sum()):,} kept")
             n_checks = seg.checks
         else:
             keep, n_checks = _check_all(pool, node_q[cand[:, 0]], node_q[cand[:, 1]], subsets, workers,

@@ -22,12 +22,12 @@ from planner.core.forked import forked_map
 from planner.core.paths import ASSETS, plain_name
 from planner.core.results import atomic_write_bytes, atomic_write_text, writing
 from planner.core.session import cached_spec_file
+from planner.core.toml_text import toml_text
 from planner.core.tomlread import load_toml
 from planner.model.geometry import pose
 from planner.model.object_mesh import MeshOptions, load_object_mesh
 from planner.model.task import BUILTIN_OBJECTS, Scene, load_task, scene_from_dict
 from planner.suite.spec import Region, SuiteObject, SuiteSpec
-from planner.suite.toml_text import toml_text
 
 PLACEMENTS = ("initial", "final")
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import viser
@@ -17,6 +17,10 @@ from ..robot_layer import RobotLayer
 from ..rooted import Rooted
 from ..scene_layer import SceneLayer
 
+if TYPE_CHECKING:
+    from ..pose_choice import PoseChoice
+    from ..tabs import PanelTabs
+
 
 class Host(Protocol):
     """What a layer may use of the live workbench: its robot (posed fully, or only its meshes), the scene's object, and
@@ -25,6 +29,8 @@ class Host(Protocol):
     q: np.ndarray
     robot_layer: RobotLayer | None
     scene_layer: SceneLayer | None
+    tabs: PanelTabs  # a layer's controls beyond its folder go into these tabs (the motion's into Playback)
+    pose_choice: PoseChoice  # "Robot at": says what the robot shows
 
     def pose_robot(self, q: np.ndarray, object_pose: np.ndarray | None = None, label: str = ...) -> None:
         """Put the robot at q and the object at `object_pose` (None: where it is); "Robot at" shows `label`."""

@@ -66,7 +66,7 @@ class ExchangeLayer(StepLayer):
                 scene.add_point_cloud(f"{self.name}/runners_up", result.nodes[result.best[1:]].astype(np.float32), BEST_COLOR,
                                       point_size=RUNNER_UP_SIZE, point_shape="circle", precision="float32")
             self._draw_routes(result, best)
-        self.folder = self.server.gui.add_folder("Exchange position", expand_by_default=False)
+        self.folder = self.server.gui.add_folder("Exchange position")
         with self.folder:
             where = f"at ({', '.join(f'{v:.2f}' for v in result.position)}) m" if len(result.best) else "none"
             grid = (f"{len(result.nodes)} nodes both hands reach ({result.step:g} m grid), {int(result.free.sum())} free; "

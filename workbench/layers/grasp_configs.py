@@ -63,7 +63,7 @@ class GraspConfigsLayer(StepLayer):
             kept, clear = len(configs.rank), int(env_free.sum())
             lines.append(f"- **{role}** ({plain(configs.arm)} hand, {placement} pose): {kept} with a configuration, "
                          f"{clear - kept} clear only, {len(env_free) - clear} removed")
-        self.folder = self.server.gui.add_folder("Grasp configurations", expand_by_default=False)
+        self.folder = self.server.gui.add_folder("Grasp configurations")
         with self.folder:
             self.server.gui.add_markdown("Palms: green = configuration, yellow = clear of the environment only, red = removed\n\n"
                                          + "\n".join(lines) + "\n\n" + stages_markdown(result.stages, result.failure))

@@ -19,15 +19,33 @@ from ..meshes import matrix_wxyz
 from .arms import ARM_COLORS
 from .base import Host, StepLayer
 from .hands import HAND_STYLE, HandMeshes
+from .roadmap import faint
 
-POINT_SIZE = 0.004  # m
-CONTACT_COLOR = (230, 30, 30)
-CONTACT_SIZE = 0.008  # m
-NORMAL_LENGTH = 0.04  # m
-CONE_HEIGHT = 0.02  # m
-CONE_STYLE = ((255, 120, 0), 0.35)
+POINT_SIZE = 0.003  # m: the object's point set, small and ...
+POINT_FADE = 0.55  # ... its leaf colours faded this far toward white, so the contacts stand out of it
+CONTACT_COLOR = (220, 0, 40)
+CONTACT_RADIUS = 0.006  # m: a sphere at each contact, larger than the point set's dots
+NORMAL_COLOR = (20, 20, 20)  # near black: the hands are drawn in the arms' colours
+NORMAL_LENGTH = 0.05  # m
+NORMAL_THICKNESS = 0.004  # m
+CONE_HEIGHT = 0.03  # m
+CONE_STYLE = ((255, 140, 0), 0.5)
 SPHERE_OPACITY = 0.3
 FINGER_COLORS = ((40, 110, 240), (30, 170, 80), (170, 60, 200), (230, 90, 30), (0, 170, 170))
+
+
+def swatch(color: tuple[int, int, int], mark: str = "&#9679;") -> str:
+    """A coloured mark for a legend (HTML)."""
+    return f"<span style='color:rgb({color[0]},{color[1]},{color[2]})'>{mark}</span>"
+
+
+def legend(mu: float, fingers: tuple[str, ...]) -> str:
+    """What the grasp layer draws, by colour: contacts, normals, friction cones (their half-angle from μ), the point set
+    and each finger's sphere hierarchy (markdown with HTML swatches; the finger names escaped)."""
+    spheres = ", ".join(f"{swatch(FINGER_COLORS[k % len(FINGER_COLORS)])} {plain(f)}" for k, f in enumerate(fingers))
+    return (f"{swatch(CONTACT_COLOR)} contact point · {swatch(NORMAL_COLOR, '&#9472;')} surface normal (outward) · "
+            f"{swatch(CONE_STYLE[0], '&#9650;')} friction cone (half-angle atan μ = {np.degrees(np.arctan(mu)):.0f}°)\n\n"
+            f"Point set: faded, one colour per kd-tree leaf. Finger spheres: {spheres}")
 
 
 def leaf_colors(leaves: np.ndarray) -> np.ndarray:
@@ -101,7 +119,7 @@ class GraspsLayer(StepLayer):
 
     def _build_gui(self, result: GraspList) -> None:
         gui = self.server.gui
-        self.folder = gui.add_folder(f"{self.title}: {result.hand} hand", expand_by_default=False)
+        self.folder = gui.add_folder(f"{self.title}: {result.hand} hand")
         with self.folder:
             if len(result):
                 labels = self.rank_labels(result)
@@ -113,6 +131,7 @@ class GraspsLayer(StepLayer):
             self.show_spheres = gui.add_checkbox("Finger sphere hierarchies", False)
             self.show_spheres.on_update(lambda _: self.set_spheres_visible(self.show_spheres.value))
             self.scores = gui.add_markdown(self.summary(result))
+            gui.add_markdown(legend(result.mu, tuple(self.hand_model.finger_names) if self.hand_model is not None else ()))
 
     @property
     def object_pose(self) -> np.ndarray:
@@ -154,7 +173,8 @@ class GraspsLayer(StepLayer):
             assert self.result is not None
             model = object_points(self.scene.object_mesh, self.result, self.params_of(self.step))
             self._points_handle = self.server.scene.add_point_cloud(
-                f"{self.name}/object/points", model.points.astype(np.float32), leaf_colors(model.leaves),
+                f"{self.name}/object/points", model.points.astype(np.float32),
+                faint(leaf_colors(model.leaves), POINT_FADE),
                 point_size=POINT_SIZE, point_shape="circle", precision="float32")
         self._points_handle.visible = visible
 
@@ -185,10 +205,11 @@ class GraspsLayer(StepLayer):
             mask = r.contact_mask[rank]
             points, normals = r.contact_point[rank][mask], r.contact_normal[rank][mask]
             if len(points):
-                self.server.scene.add_point_cloud(f"{obj_node}/contacts", points.astype(np.float32), CONTACT_COLOR,
-                                                  point_size=CONTACT_SIZE, point_shape="circle", precision="float32")
+                dots = spheres_mesh(points, np.full(len(points), CONTACT_RADIUS))
+                self.server.scene.add_mesh_simple(f"{obj_node}/contacts", dots.vertices, dots.faces, color=CONTACT_COLOR,
+                                                  cast_shadow=False, receive_shadow=False)
                 segments = np.stack([points, points + NORMAL_LENGTH * normals], axis=1)
-                self.server.scene.add_line_segments(f"{obj_node}/normals", segments, CONTACT_COLOR, thickness=0.002)
+                self.server.scene.add_line_segments(f"{obj_node}/normals", segments, NORMAL_COLOR, thickness=NORMAL_THICKNESS)
                 cones = friction_cones(points, normals, r.mu)
                 self.server.scene.add_mesh_simple(f"{obj_node}/cones", cones.vertices, cones.faces, color=CONE_STYLE[0],
                                                   opacity=CONE_STYLE[1], cast_shadow=False, receive_shadow=False)

@@ -40,6 +40,8 @@ MARK_COLOR = (250, 20, 160)
 FPS = 30.0
 WRIST_STEP = 0.03  # m: the largest wrist move between two animation frames ...
 JOINT_STEP = 0.05  # rad: ... and the largest joint move (for the torso, which moves the wrists little but the body a lot)
+MOVE_BUDGET = 600  # wrist moves drawn at first: software WebGL redraws every line each frame, so the page stays responsive
+SHOWN = ("every component", "the largest component", "the chosen node's component")  # whose moves are drawn
 
 
 def _shade(color: tuple[int, int, int], factor: float) -> tuple[int, int, int]:
@@ -48,9 +50,9 @@ def _shade(color: tuple[int, int, int], factor: float) -> tuple[int, int, int]:
     return int(r * 255), int(g * 255), int(b * 255)
 
 
-def faint(colors: np.ndarray) -> np.ndarray:
-    """uint8 colours faded toward the background by FAINT."""
-    return np.round(colors + FAINT * (BACKGROUND - colors.astype(float))).astype(np.uint8)
+def faint(colors: np.ndarray, amount: float = FAINT) -> np.ndarray:
+    """uint8 colours faded toward the background by `amount` (0: as they are, 1: the background)."""
+    return np.round(colors + amount * (BACKGROUND - colors.astype(float))).astype(np.uint8)
 
 
 def edge_component_rank(roadmap: Roadmap) -> np.ndarray:
@@ -74,8 +76,9 @@ def edge_colors(roadmap: Roadmap) -> np.ndarray:
     return out
 
 
-def wrist_segments(roadmap: Roadmap) -> tuple[np.ndarray, np.ndarray]:
-    """((k, 2, 3) segments, (k, 3) uint8 colours): each wrist's moves along the Super Graph's edges, each drawn once.
+def wrist_segments(roadmap: Roadmap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((k, 2, 3) segments, (k, 3) uint8 colours, (k,) the edge of each): each wrist's moves along the Super Graph's
+    edges, each drawn once.
 
     A wrist that holds still (one-arm edge) draws nothing, and a move that several edges share (the same elementary
     edge with the other arm anywhere) is drawn once, in the colour of its most
@@ -94,7 +97,14 @@ def wrist_segments(roadmap: Roadmap) -> tuple[np.ndarray, np.ndarray]:
     order = np.argsort(priority[moved], kind="stable")
     _, firsts = np.unique(keys[order], axis=0, return_index=True)
     kept = moved[np.sort(order[firsts])]
-    return points[kept], colors[kept]
+    return points[kept], colors[kept], kept // wrists
+
+
+def spread(n: int, budget: int) -> np.ndarray:
+    """At most `budget` of the indices 0..n-1, evenly spread over them (the first and last included)."""
+    if n <= budget:
+        return np.arange(n)
+    return np.unique(np.round(np.linspace(0, n - 1, max(budget, 1))).astype(np.int64))
 
 
 def frames(robot, path: np.ndarray) -> np.ndarray:
@@ -123,16 +133,16 @@ class RoadmapLayer(StepLayer):
         self._query: RoadmapQuery | None = None
         self._plan_lock = threading.Lock()
         self._animation = 0  # bumped to stop a running animation
+        self._moves: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # `wrist_segments` of the roadmap
+        self._edges: viser.LineSegmentsHandle | None = None
+        self.chosen = 0  # the node marked
 
     # -- drawing ---------------------------------------------------------------------------------
 
     def update(self, result: Roadmap) -> None:
         self.roadmap, self._query, self.last_query = result, None, None
+        self._moves = wrist_segments(result) if len(result.edges) else None
         stats = result.stats()
-        if len(result.edges):
-            points, colors = wrist_segments(result)
-            self.server.scene.add_line_segments(f"{self.name}/edges", points.astype(np.float32),
-                                                np.repeat(faint(colors)[:, None], 2, axis=1), thickness=LINE_THICKNESS)
         self._build_gui(stats)
         largest = int(np.argmax(np.bincount(result.node_component))) if len(result.node_q) else 0
         self.poses = {}
@@ -140,26 +150,69 @@ class RoadmapLayer(StepLayer):
             first = int(np.flatnonzero(result.node_component == largest)[0])
             self.poses = {f"roadmap: node {first} (largest component)": Pose(result.node_q[first], self.scene.object_initial)}
             self.mark(first)
+        self.draw_moves()
 
     def _build_gui(self, stats: dict) -> None:
         gui = self.server.gui
         n = max(1, stats["nodes"])
+        moves = len(self._moves[0]) if self._moves is not None else 0
         with gui.add_folder("Roadmap") as self.folder:
             gui.add_markdown(f"Super Graph: **{plain(stats['nodes'])}** nodes, **{plain(stats['edges'])}** edges, "
                              f"**{plain(stats['components'])}** components (largest {plain(stats['largest_component'])}); "
                              + ", ".join(f"{plain(a)} wrist: {c}" for a, c in zip(self.roadmap.arms, ARM_COLOR_NAMES)))
+            self.shown_of = gui.add_dropdown("Moves of", SHOWN, hint="Whose wrist moves are drawn")
+            self.budget = gui.add_slider("Moves drawn", min=min(100, max(moves, 1)), max=max(moves, 1), step=max(1, moves // 100),
+                                         initial_value=min(MOVE_BUDGET, max(moves, 1)),
+                                         hint="At most this many wrist moves, evenly spread (more draw slower in the browser)")
+            self.drawn = gui.add_markdown("")
             self.node = gui.add_slider("Node", min=0, max=n - 1, step=1, initial_value=0,
                                        hint="A Super Graph node: the robot goes there")
             self.go_button = gui.add_button("Robot to node")
             self.plan_button = gui.add_button("Plan to node", hint="Plan from the current configuration (hands at rest) and animate")
             self.status = gui.add_markdown("")
+        self.shown_of.on_update(lambda _: self.draw_moves())
+        self.budget.on_update(lambda _: self.draw_moves())
         self.node.on_update(lambda e: self.pick(int(e.target.value)))
         self.go_button.on_click(lambda _: self.pick(int(self.node.value)))
         self.plan_button.on_click(lambda _: self.plan_to(int(self.node.value)))
 
+    def moves_drawn(self) -> np.ndarray:
+        """The indices of the wrist moves drawn: those of the components chosen in "Moves of", at most "Moves drawn" of
+        them, evenly spread."""
+        assert self.roadmap is not None and self._moves is not None
+        roadmap, edge = self.roadmap, self._moves[2]
+        component = roadmap.node_component[roadmap.edges[edge, 0]]
+        if self.shown_of.value == SHOWN[1]:
+            candidates = np.flatnonzero(component == np.argmax(np.bincount(roadmap.node_component)))
+        elif self.shown_of.value == SHOWN[2]:
+            candidates = np.flatnonzero(component == roadmap.node_component[self.chosen])
+        else:
+            candidates = np.arange(len(edge))
+        return candidates[spread(len(candidates), int(self.budget.value))]
+
+    def draw_moves(self) -> None:
+        """(Re)draw the wrist moves `moves_drawn` picks, and say how many of how many are drawn."""
+        if self._moves is None:
+            self.drawn.content = "*No edges to draw.*"
+            return
+        points, colors, _ = self._moves
+        drawn = self.moves_drawn()
+        if self._edges is not None:
+            self._edges.remove()
+            self._edges = None
+        if len(drawn):
+            self._edges = self.server.scene.add_line_segments(f"{self.name}/edges", points[drawn].astype(np.float32),
+                                                              np.repeat(faint(colors[drawn])[:, None], 2, axis=1),
+                                                              thickness=LINE_THICKNESS)
+        self.drawn.content = f"Drawn: **{len(drawn)}** of {len(points)} wrist moves."
+
     def mark(self, i: int) -> None:
-        """Mark node i: a sphere at each of its wrists and a label."""
+        """Mark node i: a sphere at each of its wrists and a label; with "the chosen node's component", its moves are drawn."""
         assert self.roadmap is not None
+        redraw = self.chosen != i and self.shown_of.value == SHOWN[2]
+        self.chosen = i
+        if redraw:
+            self.draw_moves()
         for w, p in enumerate(self.roadmap.wrists[i]):
             self.server.scene.add_icosphere(f"{self.name}/mark/w{w}", radius=MARK_RADIUS, color=MARK_COLOR, position=p,
                                             cast_shadow=False, receive_shadow=False)

@@ -1,9 +1,25 @@
-"""TOML text of a task's data (what tomllib read): the generated tasks are written as plain task files."""
+"""TOML text of data as tomllib reads it (tasks written by the suite's generator and by the workbench's task editor).
+
+The one TOML writer, beside the one reader (`planner.core.tomlread`): every string is escaped so that any text (a
+description typed in a browser included) reads back as it was written and never as more TOML.
+"""
 from __future__ import annotations
 
-import json
 import math
+import re
 from typing import Any
+
+# what a TOML basic string may not hold as itself: the quote, the backslash, and control characters (TOML 1.0)
+_ESCAPED = re.compile(r'["\\\x00-\x1f\x7f]')
+_SHORT = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _string(text: str) -> str:
+    """A TOML basic string holding `text`; a lone surrogate (no Unicode character, no UTF-8) is refused."""
+    if any("\ud800" <= c <= "\udfff" for c in text):
+        raise ValueError(f"TOML text holds Unicode characters only, got a lone surrogate in {text[:40]!r}")
+    return '"' + _ESCAPED.sub(lambda m: _SHORT.get(m.group(), f"\\u{ord(m.group()):04x}"), text) + '"'
 
 
 def _value(value: Any) -> str:
@@ -11,7 +27,7 @@ def _value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
-        return json.dumps(value)
+        return _string(value)
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
@@ -26,7 +42,7 @@ def _value(value: Any) -> str:
 
 
 def _key(key: str) -> str:
-    return key if key.replace("_", "").replace("-", "").isalnum() and key.isascii() else json.dumps(key)
+    return key if _BARE_KEY.fullmatch(key) else _string(key)
 
 
 def toml_text(data: dict[str, Any]) -> str:
