@@ -17,14 +17,17 @@ from generated_objects import TASK_TEXT_ROBOT
 from oracle import Oracle, motion_collisions
 
 from planner.core.results import load_result, save_result
-from planner.core.runner import run_pipeline
+from planner.core.runner import run_pipeline, run_step
 from planner.core.session import Session
 from planner.core.steps import StepFailed
 from planner.model.shapes import box, obj_text, on_desk
 from planner.model.task import load_task
 from planner.motion.result import PHASES, TABLE_PHASES, Motion
+from planner.pipeline import step_named
 from planner.regrasp.placements import PlacementParams, stable_placements
+from workbench.layers.arms import ARM_COLORS
 from workbench.layers.motion import PHASE_COLORS, route_segments, table_one
+from workbench.layers.placements import BOTH_COLOR, NONE_COLOR, reach_colors
 
 DESK_TOP = 0.72  # m: the default desk's top surface (assets/tasks/default.toml)
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
@@ -64,6 +67,20 @@ def test_placements_rest_on_a_support_clear_of_every_other_obstacle(cube_scene):
         assert not oracle.object_obstacle_hits(T, {support}), "the object hits an obstacle"
     both = placements.reached.all(axis=1)
     assert both.any() and not np.any(np.diff(both.astype(int)) > 0), "placements both arms reach come first"
+
+
+def test_the_placements_step_is_recorded_and_drawn(tmp_path, cube_scene):
+    """The step's result goes through its session files unchanged; every placement rests on a support the task names,
+    and the layer colours each by the arms that reach it."""
+    session = Session.create(tmp_path / "session", cube_scene, 0)
+    run_step(session, step_named("placements"), {"spacing": 0.3, "headings": 1, "seeds": 1})  # it needs nothing but the scene
+    again = Session.open(tmp_path / "session").result("placements")
+    first = session.result("placements")
+    assert np.array_equal(again.pose, first.pose) and np.array_equal(again.reached, first.reached) and again.stages == first.stages
+    assert len(again) and set(again.support) <= {ob.name for ob in cube_scene.environment}
+    assert again.stats()["reached_by_both"] == int(again.reached.all(axis=1).sum())
+    colors = reach_colors(np.array([[True, True], [True, False], [False, True], [False, False]]))
+    assert [tuple(c) for c in colors] == [BOTH_COLOR, ARM_COLORS[0], ARM_COLORS[1], NONE_COLOR]
 
 
 @pytest.mark.slow

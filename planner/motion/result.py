@@ -55,11 +55,6 @@ class MotionParams:
                               tuple(STRATEGIES))
     table_placements: int = bounded(6, 1, 1000, "placements", "table: intermediate placements both arms reach tried, best first")
     table_candidates: int = bounded(16, 1, 1000, "motions", "table: (placement, pick grasp, place grasp) motions tried in all")
-    placement_spacing: float = bounded(0.1, 0.01, 1.0, "m", "table: grid spacing of the positions on each support")
-    placement_headings: int = bounded(4, 1, 64, "headings", "table: headings per position and resting pose")
-    placement_min_probability: float = bounded(0.05, 0.0, 1.0, "(probability)", "table: resting poses less likely are left out")
-    placement_seeds: int = bounded(8, 1, 1000, "IK starts", "table: IK starts per arm and position, to find which arm reaches it")
-    placement_tolerance: float = bounded(0.02, 0.001, 0.2, "m", "table: reach brings the fingertip centre this near the centre of mass")
 
     def problem(self) -> str:
         """What is wrong with the values, naming the parameter ('' when nothing): checked before the step runs."""

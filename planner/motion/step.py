@@ -32,6 +32,7 @@ from planner.motion.sampling import sample
 from planner.motion.smoothing import Smoother
 from planner.motion.strategies import Attempt
 from planner.motion.validities import Validities
+from planner.regrasp.placements import Placements
 from planner.roadmap.result import Roadmap
 
 GRASP, CARRY, PLACE, REST, SET_DOWN, REGRASP = Phase
@@ -59,19 +60,20 @@ def collector_paused() -> Iterator[None]:
 
 def plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps, roadmap: Roadmap, p: MotionParams,
                 rng: np.random.Generator, progress: Progress = no_progress,
-                configs: tuple[GraspConfigs, GraspConfigParams] | None = None) -> tuple[Motion, list[float]]:
+                configs: tuple[GraspConfigs, GraspConfigParams] | None = None, placements: Placements | None = None
+                ) -> tuple[Motion, list[float]]:
     """(the motion, its stage seconds): the first strategy (strategies.py) whose whole motion is valid; `configs` (the
-    grasp configurations and their parameters) let the table handover be tried."""
+    grasp configurations and their parameters) and `placements` let the table handover be tried."""
     problem = p.problem()
     if problem:
         raise ValueError(f"motion.{problem}")
     with collector_paused():
-        return _plan_motion(scene, pick, place, dg, roadmap, p, rng, progress, configs)
+        return _plan_motion(scene, pick, place, dg, roadmap, p, rng, progress, configs, placements)
 
 
 def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps, roadmap: Roadmap, p: MotionParams,
-                 rng: np.random.Generator, progress: Progress, configs: tuple[GraspConfigs, GraspConfigParams] | None
-                 ) -> tuple[Motion, list[float]]:
+                 rng: np.random.Generator, progress: Progress, configs: tuple[GraspConfigs, GraspConfigParams] | None,
+                 placements: Placements | None) -> tuple[Motion, list[float]]:
     robot = scene.robot
     cm = build_collision_model(robot, scene.environment)
     transit = transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding)
@@ -84,7 +86,7 @@ def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGras
     rejected: list[Attempt] = []
     for name in STRATEGIES[p.strategy]:
         attempt = (strategies.handover(make, pick, place, dg, p, progress) if name == "handover" else
-                   strategies.table(make, scene, pick, place, configs, p, rng, progress))
+                   strategies.table(make, scene, pick, place, configs, placements, p, rng, progress))
         if attempt.pieces is not None:
             break
         rejected.append(attempt)
@@ -181,10 +183,10 @@ def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: 
 def run(ctx: StepContext) -> StepOutput:
     i = ctx.inputs
     motion, seconds = plan_motion(ctx.scene, i["pick_grasps"], i["place_grasps"], i["double_grasps"], i["roadmap"], ctx.params,
-                                  ctx.rng, ctx.progress, (i["grasp_configs"], ctx.input_params["grasp_configs"]))
+                                  ctx.rng, ctx.progress, (i["grasp_configs"], ctx.input_params["grasp_configs"]), i["placements"])
     return StepOutput(motion, tuple(seconds))
 
 
 NAME = "motion"
 STEP = Step(NAME, "the whole task's motion: Grasp, Carry, Place, Rest on the Super Graph (V-B)",
-            ("pick_grasps", "place_grasps", "grasp_configs", "double_grasps", "roadmap"), MotionParams, Motion, run)
+            ("pick_grasps", "place_grasps", "grasp_configs", "double_grasps", "roadmap", "placements"), MotionParams, Motion, run)

@@ -2,8 +2,8 @@
 
 Handover: the double grasps best first (double_grasp.py), the paper's plan, or a direct transfer. Table: the picking
 hand sets the object down at an intermediate placement both arms reach, and the placing hand takes it there
-(table_handover.py); the placements (planner/regrasp/placements.py) and the configurations there
-(planner/regrasp/table_configs.py) are computed only when the table is tried. Each attempt says why every candidate
+(table_handover.py): at the placements step's placements (planner/regrasp/placements.py), with configurations there
+(planner/regrasp/table_configs.py) computed only when the table is tried. Each attempt says why every candidate
 it tried failed, and, when none worked, the stage that removed them.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ from planner.motion.phase import Phase
 from planner.motion.piece import HandGrasp, Piece, PieceFailed
 from planner.motion.result import MotionParams
 from planner.motion.table_handover import plan_table
-from planner.regrasp.placements import PlacementParams, stable_placements
+from planner.regrasp.placements import Placements
 from planner.regrasp.table_configs import table_candidates
 
 
@@ -77,23 +77,18 @@ def handover(make: Callable[[], DoubleGraspPlanner], pick: GraspList, place: Gra
 
 
 def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList, place: GraspList,
-          configs: tuple[GraspConfigs, GraspConfigParams] | None, p: MotionParams, rng: np.random.Generator,
-          progress: Progress) -> Attempt:
+          configs: tuple[GraspConfigs, GraspConfigParams] | None, placements: Placements | None, p: MotionParams,
+          rng: np.random.Generator, progress: Progress) -> Attempt:
     """The first (intermediate placement, pick grasp, place grasp), best first, whose whole motion is valid: at most
     `table_candidates` tried, spread evenly over the first `table_placements` placements; a pick grasp whose Grasp or
     Set down failed at a placement is not tried there again with another place grasp (they change neither), nor a place
     grasp whose Carry, Place or Rest failed (carried from a placement that both arms reach to the final one, the next
     place grasp is likelier to get there than the next placement)."""
     out = Attempt("table")
-    if configs is None:
-        out.failure = "grasp configurations: not given to the motion planner"
+    if configs is None or placements is None:
+        out.failure = "grasp configurations and placements: not given to the motion planner"
         return out
-    progress(0.0, "stable placements of the object")
-    placements, seconds = stable_placements(scene, PlacementParams(p.placement_spacing, p.placement_headings,
-                                                                   p.placement_min_probability, p.placement_seeds,
-                                                                   p.placement_tolerance), progress)
     started = time.perf_counter()
-    out.stages, out.seconds = list(placements.stages), list(seconds)
     grasp_configs, params = configs
     if configs[0].picking_arm == configs[0].placing_arm:
         out.failure = f"arms: the {grasp_configs.picking_arm} arm picks and places, so no other hand takes the object"
@@ -130,7 +125,7 @@ def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList,
     out.stages.append({"stage": "table handovers", "count": len(out.tried), "note": why or "every candidate tried"})
     out.seconds.append(time.perf_counter() - started)
     if out.pieces is None:
-        counts = "; ".join(f"{s['stage']}: {s['count']}" for s in out.stages)
+        counts = "; ".join(f"{s['stage']}: {s['count']}" for s in [*placements.stages, *out.stages])
         out.failure = (f"table: no valid motion for any of the {len(out.tried)} table handovers tried: " + "; ".join(
             f"{i + 1}: {w}" for i, w in enumerate(out.tried)) if out.tried else
             f"table: no intermediate placement where one hand sets the object down and the other takes it ({counts})")
