@@ -90,7 +90,11 @@ def test_a_cube_is_handed_over_through_the_table(tmp_path):
     run_pipeline(session)
     m = session.result("motion")
     assert not m.failure and m.strategy == "table"
-    assert [a["strategy"] for a in m.alternatives] == ["handover"] and m.alternatives[0]["failure"].startswith("double grasps:")
+    rejected = {a["strategy"]: a["failure"] for a in m.alternatives}
+    assert set(rejected) == {"handover", "regrasp"} and rejected["handover"].startswith("double grasps:")
+    assert rejected["regrasp"].startswith("arms:")  # the two arms: no hand picks and places
+    assert [t["kind"] for t in m.sequence] == ["pick", "set down", "take", "carry", "place"]
+    assert m.sequence[1]["hand"] != m.sequence[2]["hand"] and m.sequence[1]["at"] >= 0
     assert session.result("double_grasps").failure  # recorded, and the pipeline went on to the motion
     # held by one hand, at rest, held by the other
     runs = held_spans(m)
