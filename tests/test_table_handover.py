@@ -96,28 +96,38 @@ def test_a_cube_is_handed_over_through_the_table(tmp_path):
     assert [t["kind"] for t in m.sequence] == ["pick", "set down", "take", "carry", "place"]
     assert m.sequence[1]["hand"] != m.sequence[2]["hand"] and m.sequence[1]["at"] >= 0
     assert session.result("double_grasps").failure  # recorded, and the pipeline went on to the motion
-    # held by one hand, at rest, held by the other
+    first, second = moved_through_a_placement(session, m)
+    assert m.holder[first[0]] != m.holder[second[0]]  # held by one hand, at rest, held by the other
+    # forced to hand over in the air, the motion fails naming the stage that removed every double grasp
+    branch = session.branch(tmp_path / "handover", "motion")
+    with pytest.raises(StepFailed, match="handover strategy: double grasps: no compatible pair"):
+        run_pipeline(branch, params={"motion": {"strategy": "handover"}})
+
+
+def moved_through_a_placement(session, m) -> tuple[np.ndarray, np.ndarray]:
+    """The samples of the two spans where a hand holds the object, checked: the object at rest before, between (on the
+    desk, at the motion's intermediate placement) and after them; the phases in time Grasp, Set down, Regrasp, Carry,
+    Place, Rest, each named; the object at its final placement at the end; every sample clear by the oracle."""
+    scene = session.scene
     runs = held_spans(m)
-    assert len(runs) == 5 and runs[0] == runs[2] == runs[4] == -1 and runs[1] >= 0 and runs[3] >= 0 and runs[1] != runs[3], runs
-    first_held, second_held = (np.flatnonzero(m.holder == h) for h in (runs[1], runs[3]))
-    between = np.arange(first_held[-1] + 1, second_held[0])
+    assert len(runs) == 5 and runs[0] == runs[2] == runs[4] == -1 and runs[1] >= 0 and runs[3] >= 0, runs
+    held = np.flatnonzero(m.holder >= 0)
+    gap = int(np.flatnonzero(np.diff(held) > 1)[0])
+    first, second = held[: gap + 1], held[gap + 1:]
+    between = np.arange(first[-1] + 1, second[0])
     assert len(between) > 1 and np.allclose(m.object_pose[between], m.object_pose[between[0]])
     rest = m.object_pose[between[0]]
     assert np.allclose(rest, np.asarray(m.intermediate), atol=1e-6)
     low = (np.asarray(scene.object_mesh.vertices) @ rest[:3, :3].T + rest[:3, 3])[:, 2].min()
     assert abs(low - DESK_TOP) < 1e-4, f"the object rests {low - DESK_TOP:+.4f} m off the desk"
     assert not np.allclose(rest, scene.object_initial) and not np.allclose(rest, scene.object_final)
-    # the phases in time: Grasp, Set down, Regrasp, Carry, Place, Rest, each named
     order = [m.phase_names[int(p)] for k, p in enumerate(m.phase) if k == 0 or p != m.phase[k - 1]]
     assert order == ["Grasp", "Set down", "Regrasp", "Carry", "Place", "Rest"], order
     assert [row["phase"] for row in m.phases] == list(m.phase_names)
     assert np.allclose(m.object_pose[-1], scene.object_final, atol=1e-4)
     bad = motion_collisions(session, m)
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
-    # forced to hand over in the air, the motion fails naming the stage that removed every double grasp
-    branch = session.branch(tmp_path / "handover", "motion")
-    with pytest.raises(StepFailed, match="handover strategy: double grasps: no compatible pair"):
-        run_pipeline(branch, params={"motion": {"strategy": "handover"}})
+    return first, second
 
 
 def held_spans(m) -> list[int]:
@@ -135,10 +145,8 @@ def test_the_table_can_be_forced_on_the_default_task(tmp_path):
     run_pipeline(session, params={"motion": {"strategy": "table"}})
     m = session.result("motion")
     assert not m.failure and m.strategy == "table" and not m.alternatives  # the handover was not tried
-    spans = held_spans(m)
-    assert len(spans) == 5 and spans[::2] == [-1, -1, -1] and min(spans[1], spans[3]) >= 0 and spans[1] != spans[3], spans
-    bad = motion_collisions(session, m)
-    assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
+    first, second = moved_through_a_placement(session, m)
+    assert m.holder[first[0]] != m.holder[second[0]]
 
 
 def _motion(phases: list[int], names: tuple, **extra) -> Motion:

@@ -8,8 +8,9 @@ hand (a table handover) or the same hand in another grasp (a same-hand regrasp, 
 Grasps are in the object's frame, so only the configurations at an intermediate placement are new: found by the
 grasp_configs step's sampler, checked against the environment and the object resting there, each once, when the
 search first pops an edge that needs it; with its near-rest starts only, the first collision-free one kept (an
-intermediate placement is one of many: a grasp those starts miss there is left for the next placement). Placements tried: the first `table_placements` that both arms reach (a
-table handover) or that the arm reaches (a same-hand regrasp); grasps: each hand's `regrasp_grasps` best-scored.
+intermediate placement is one of many: a grasp those starts miss there is left for the next placement). Placements
+tried: the first `table_placements` that both arms reach (a table handover) or that the arm reaches (a same-hand
+regrasp); grasps: each hand's `regrasp_grasps` best-scored.
 """
 from __future__ import annotations
 

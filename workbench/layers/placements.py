@@ -40,8 +40,9 @@ class PlacementsLayer(StepLayer):
                                               point_size=DOT_SIZE, point_shape="circle", precision="float32")
         self.poses = {"placements: the object at the first placement": Pose(self.scene.q_initial, result.pose[0])} if len(result) else {}
         arms = ", ".join(f"{plain(a)}: {int(result.reached[:, k].sum())}" for k, a in enumerate(result.arms))
+        supports = plain(", ".join(sorted(set(result.support))) or "no support")
         self.folder = self.server.gui.add_folder("Placements", expand_by_default=False)
         with self.folder:
-            self.server.gui.add_markdown(f"{len(result)} stable placements on {plain(', '.join(sorted(set(result.support))) or 'no support')}; "
-                                         f"reached by {arms}. Dots at the centre of mass: green = both arms reach it, an arm's "
-                                         f"colour = that arm alone, grey = neither.\n\n" + stages_markdown(result.stages, ""))
+            self.server.gui.add_markdown(f"{len(result)} stable placements on {supports}; reached by {arms}. Dots at the centre of "
+                                         "mass: green = both arms reach it, an arm's colour = that arm alone, grey = neither.\n\n"
+                                         + stages_markdown(result.stages, ""))
