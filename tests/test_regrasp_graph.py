@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from planner.regrasp.graph import FINAL, GOAL, INITIAL, START, CostModel, Edge, Node, Search
+from planner.regrasp.task_graph import same_grasp
 
 A, B = "right", "left"
 PICKED = Node(A, "pick", 0, INITIAL)
@@ -87,3 +88,13 @@ def test_a_graph_without_a_way_to_the_goal_gives_no_sequence():
             Edge("set down", SET, 2, make=calls.maker("nowhere", None), why="cannot set down")] if node == PICKED else []
     search = Search(CostModel(1.0, 1.0), expand, np.zeros(2), np.zeros(2), place_left)
     assert list(search.sequences()) == [] and search.dropped == {"cannot set down": 1} and search.expanded == 2
+
+
+def test_a_palm_pose_turned_or_moved_past_the_tolerance_is_another_grasp():
+    def turned(angle: float, shift: float) -> np.ndarray:
+        c, s = np.cos(angle), np.sin(angle)
+        return np.array([[c, -s, 0.0, shift], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+    assert same_grasp(np.eye(4), turned(0.1, 0.012)) and same_grasp(turned(0.3, 0.0), turned(0.0, 0.0))
+    assert not same_grasp(np.eye(4), turned(0.4, 0.0)) and not same_grasp(np.eye(4), turned(0.0, 0.04))
+    assert not same_grasp(np.eye(4), turned(np.pi, 0.0))

@@ -38,10 +38,10 @@ LIFTED = 0.001  # m: the object is checked this far above its support (resting o
 class PlacementParams:
     """How the placements are searched."""
 
-    spacing: float = bounded(0.1, 0.01, 1.0, "m", "grid spacing of the positions on each support")
+    spacing: float = bounded(0.15, 0.01, 1.0, "m", "grid spacing of the positions on each support")
     headings: int = bounded(4, 1, 64, "headings", "headings per position and resting pose")
     min_probability: float = bounded(0.05, 0.0, 1.0, "(probability)", "resting poses less likely are left out")
-    seeds: int = bounded(8, 1, 1000, "IK starts", "IK starts per arm and position, to find which arm reaches it")
+    seeds: int = bounded(4, 1, 1000, "IK starts", "IK starts per arm and position, to find which arm reaches it")
     tolerance: float = bounded(0.02, 0.001, 0.2, "m", "reach brings the fingertip centre this near the centre of mass")
 
 

@@ -42,6 +42,16 @@ class Limits:
     grasps: int
 
 
+SAME_GRASP = (0.03, 0.35)  # m, rad: palm poses in the object's frame nearer than both are one grasp (taken again in it,
+# or a finger's width beside it, the object would be set down for nothing)
+
+
+def same_grasp(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two palm poses in the object's frame are one grasp (SAME_GRASP)."""
+    cos = (np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0
+    return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < SAME_GRASP[0] and np.arccos(np.clip(cos, -1.0, 1.0)) < SAME_GRASP[1])
+
+
 class TaskGraph:
     """The edges out of each node (see the module), for the strategies in `allowed`."""
 
@@ -119,9 +129,12 @@ class TaskGraph:
                      why="the picking hand cannot set it down there with its grasp") for k in self.spots]
 
     def _takes(self, node: Node) -> list[Edge]:
+        """The placing hand taking the object at the node's placement; the same hand (a regrasp) only in another grasp."""
+        held = self.pick.hand_pose[node.grasp]
         return [Edge("take", Node(self.b, "place", int(self.hq.rank[j]), node.at), CONTACTS["take"],
                      make=lambda j=j: self._configuration(self.b, "place", int(self.hq.rank[j]), node.at, self.hq.q[j]),
-                     why="the placing hand cannot take it there with its grasp") for j in self.best_place]
+                     why="the placing hand cannot take it there with its grasp") for j in self.best_place
+                if self.take == TABLE or not same_grasp(held, self.place.hand_pose[int(self.hq.rank[j])])]
 
     def _configuration(self, arm: str, role: str, rank: int, k: int, start: np.ndarray) -> np.ndarray | None:
         """(1, nq): the robot with `arm` holding the object at placement k in grasp `rank`, the other arm out of the way
