@@ -63,6 +63,8 @@ def ruled_out(dg: DoubleGrasps, configs: GraspConfigs | None, placements: Placem
     out = {}
     if HANDOVER in allowed and (dg.failure or not len(dg)):
         out[HANDOVER] = f"double grasps: {dg.failure or 'none to move with'}"
+    elif HANDOVER in allowed and configs is None:
+        out[HANDOVER] = "grasp configurations: not given to the motion planner"
     for name in (TABLE, REGRASP):
         if name not in allowed:
             continue

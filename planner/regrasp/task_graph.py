@@ -56,7 +56,7 @@ class TaskGraph:
     """The edges out of each node (see the module), for the strategies in `allowed`."""
 
     def __init__(self, scene: Scene, pick: GraspList, place: GraspList, configs: GraspConfigs, params: GraspConfigParams,
-                 dg: DoubleGrasps, placements: Placements, limits: Limits, allowed: set[str], rng: np.random.Generator):
+                 dg: DoubleGrasps, placements: Placements | None, limits: Limits, allowed: set[str], rng: np.random.Generator):
         self.scene, self.pick, self.place, self.dg, self.placements, self.rng = scene, pick, place, dg, placements, rng
         self.a, self.b = configs.picking_arm, configs.placing_arm
         self.hp, self.hq = configs.hand("pick"), configs.hand("place")
@@ -64,8 +64,9 @@ class TaskGraph:
         quick = dataclasses.replace(params, wide_attempts=0, keep=1)
         self.sampler = ConfigSampler(scene.robot, ObjectCollision(scene), ConfigScorer(scene.robot, quick.weights()), quick)
         self.take = REGRASP if self.a == self.b else TABLE  # what taking the object at an intermediate placement is
-        columns = [placements.arms.index(arm) for arm in (self.a, self.b)]
-        both = np.flatnonzero(placements.reached[:, columns].all(axis=1)) if len(placements) else np.zeros(0, int)
+        both = np.zeros(0, int)
+        if placements is not None and len(placements):  # none given: the handover alone
+            both = np.flatnonzero(placements.reached[:, [placements.arms.index(arm) for arm in (self.a, self.b)]].all(axis=1))
         self.spots = [int(k) for k in both[: limits.placements]]
         self.best_pick = set(self.hp.rank[np.lexsort((np.arange(len(self.hp.rank)), -self.hp.score))][: limits.grasps].tolist())
         self.best_place = np.lexsort((np.arange(len(self.hq.rank)), -self.hq.score))[: limits.grasps]
