@@ -67,15 +67,10 @@ class TaskGraph:
         both = np.zeros(0, int)
         if placements is not None and len(placements):  # none given: the handover alone
             both = np.flatnonzero(placements.reached[:, [placements.arms.index(arm) for arm in (self.a, self.b)]].all(axis=1))
-        self.spots = [int(k) for k in both[: limits.placements]]
+        self.spots = [int(k) for k in both[: limits.placements]]  # the intermediate placements, best first
         self.best_pick = set(self.hp.rank[np.lexsort((np.arange(len(self.hp.rank)), -self.hp.score))][: limits.grasps].tolist())
         self.best_place = np.lexsort((np.arange(len(self.hq.rank)), -self.hq.score))[: limits.grasps]
         self.made: dict[tuple, np.ndarray | None] = {}
-
-    def placements_for(self, strategy: str) -> list[int]:
-        """The intermediate placements a strategy may use: those both arms (or the one arm) reach, best first; none for
-        the strategy this task's arms rule out (see the module)."""
-        return self.spots if strategy == self.take else []
 
     def remaining(self, node: Node) -> int:
         """The contact motions still to make from `node` at least (A*'s estimate, with the distance; see graph.py)."""
