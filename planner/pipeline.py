@@ -6,9 +6,10 @@ from planner.core.errors import RegraspError
 from planner.core.steps import Step
 from planner.grasping import grasp_list as grasps
 from planner.handover import arms, double_grasps, exchange, grasp_configs
+from planner.regrasp import placements
 
 PIPELINE: tuple[Step, ...] = (arms.STEP, grasps.PICK_STEP, grasps.PLACE_STEP, grasp_configs.STEP, exchange.STEP, double_grasps.STEP,
-                              roadmap.STEP, motion.STEP)
+                              roadmap.STEP, placements.STEP, motion.STEP)
 
 
 def canonical(name: str) -> str:

@@ -17,15 +17,18 @@ from generated_objects import TASK_TEXT_ROBOT
 from oracle import Oracle, motion_collisions
 
 from planner.core.results import load_result, save_result
-from planner.core.runner import run_pipeline
+from planner.core.runner import run_pipeline, run_step
 from planner.core.session import Session
 from planner.core.steps import StepFailed
 from planner.model.shapes import box, obj_text, on_desk
 from planner.model.task import load_task
 from planner.motion.result import PHASES, TABLE_PHASES, Motion
+from planner.pipeline import step_named
 from planner.regrasp.placements import PlacementParams, stable_placements
+from workbench.layers.arms import ARM_COLORS
 from workbench.layers.motion import route_segments, table_one
 from workbench.layers.phases import PHASE_COLORS
+from workbench.layers.placements import BOTH_COLOR, NONE_COLOR, reach_colors
 
 DESK_TOP = 0.72  # m: the default desk's top surface (assets/tasks/default.toml)
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
@@ -67,6 +70,20 @@ def test_placements_rest_on_a_support_clear_of_every_other_obstacle(cube_scene):
     assert both.any() and not np.any(np.diff(both.astype(int)) > 0), "placements both arms reach come first"
 
 
+def test_the_placements_step_is_recorded_and_drawn(tmp_path, cube_scene):
+    """The step's result goes through its session files unchanged; every placement rests on a support the task names,
+    and the layer colours each by the arms that reach it."""
+    session = Session.create(tmp_path / "session", cube_scene, 0)
+    run_step(session, step_named("placements"), {"spacing": 0.3, "headings": 1, "seeds": 1})  # it needs nothing but the scene
+    again = Session.open(tmp_path / "session").result("placements")
+    first = session.result("placements")
+    assert np.array_equal(again.pose, first.pose) and np.array_equal(again.reached, first.reached) and again.stages == first.stages
+    assert len(again) and set(again.support) <= {ob.name for ob in cube_scene.environment}
+    assert again.stats()["reached_by_both"] == int(again.reached.all(axis=1).sum())
+    colors = reach_colors(np.array([[True, True], [True, False], [False, True], [False, False]]))
+    assert [tuple(c) for c in colors] == [BOTH_COLOR, ARM_COLORS[0], ARM_COLORS[1], NONE_COLOR]
+
+
 @pytest.mark.slow
 def test_a_cube_is_handed_over_through_the_table(tmp_path):
     scene = load_task(cube_task(tmp_path))
@@ -74,30 +91,44 @@ def test_a_cube_is_handed_over_through_the_table(tmp_path):
     run_pipeline(session)
     m = session.result("motion")
     assert not m.failure and m.strategy == "table"
-    assert [a["strategy"] for a in m.alternatives] == ["handover"] and m.alternatives[0]["failure"].startswith("double grasps:")
+    rejected = {a["strategy"]: a["failure"] for a in m.alternatives}
+    assert set(rejected) == {"handover", "regrasp"} and rejected["handover"].startswith("double grasps:")
+    assert rejected["regrasp"].startswith("arms:")  # the two arms: no hand picks and places
+    assert [t["kind"] for t in m.sequence] == ["pick", "set down", "take", "carry", "place"]
+    assert m.sequence[1]["hand"] != m.sequence[2]["hand"] and m.sequence[1]["at"] >= 0
     assert session.result("double_grasps").failure  # recorded, and the pipeline went on to the motion
-    # held by one hand, at rest, held by the other
+    first, second = moved_through_a_placement(session, m)
+    assert m.holder[first[0]] != m.holder[second[0]]  # held by one hand, at rest, held by the other
+    # forced to hand over in the air, the motion fails naming the stage that removed every double grasp
+    branch = session.branch(tmp_path / "handover", "motion")
+    with pytest.raises(StepFailed, match="handover strategy: double grasps: no compatible pair"):
+        run_pipeline(branch, params={"motion": {"strategy": "handover"}})
+
+
+def moved_through_a_placement(session, m) -> tuple[np.ndarray, np.ndarray]:
+    """The samples of the two spans where a hand holds the object, checked: the object at rest before, between (on the
+    desk, at the motion's intermediate placement) and after them; the phases in time Grasp, Set down, Regrasp, Carry,
+    Place, Rest, each named; the object at its final placement at the end; every sample clear by the oracle."""
+    scene = session.scene
     runs = held_spans(m)
-    assert len(runs) == 5 and runs[0] == runs[2] == runs[4] == -1 and runs[1] >= 0 and runs[3] >= 0 and runs[1] != runs[3], runs
-    first_held, second_held = (np.flatnonzero(m.holder == h) for h in (runs[1], runs[3]))
-    between = np.arange(first_held[-1] + 1, second_held[0])
+    assert len(runs) == 5 and runs[0] == runs[2] == runs[4] == -1 and runs[1] >= 0 and runs[3] >= 0, runs
+    held = np.flatnonzero(m.holder >= 0)
+    gap = int(np.flatnonzero(np.diff(held) > 1)[0])
+    first, second = held[: gap + 1], held[gap + 1:]
+    between = np.arange(first[-1] + 1, second[0])
     assert len(between) > 1 and np.allclose(m.object_pose[between], m.object_pose[between[0]])
     rest = m.object_pose[between[0]]
     assert np.allclose(rest, np.asarray(m.intermediate), atol=1e-6)
     low = (np.asarray(scene.object_mesh.vertices) @ rest[:3, :3].T + rest[:3, 3])[:, 2].min()
     assert abs(low - DESK_TOP) < 1e-4, f"the object rests {low - DESK_TOP:+.4f} m off the desk"
     assert not np.allclose(rest, scene.object_initial) and not np.allclose(rest, scene.object_final)
-    # the phases in time: Grasp, Set down, Regrasp, Carry, Place, Rest, each named
     order = [m.phase_names[int(p)] for k, p in enumerate(m.phase) if k == 0 or p != m.phase[k - 1]]
     assert order == ["Grasp", "Set down", "Regrasp", "Carry", "Place", "Rest"], order
     assert [row["phase"] for row in m.phases] == list(m.phase_names)
     assert np.allclose(m.object_pose[-1], scene.object_final, atol=1e-4)
     bad = motion_collisions(session, m)
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
-    # forced to hand over in the air, the motion fails naming the stage that removed every double grasp
-    branch = session.branch(tmp_path / "handover", "motion")
-    with pytest.raises(StepFailed, match="handover strategy: double grasps: no compatible pair"):
-        run_pipeline(branch, params={"motion": {"strategy": "handover"}})
+    return first, second
 
 
 def held_spans(m) -> list[int]:
@@ -115,10 +146,8 @@ def test_the_table_can_be_forced_on_the_default_task(tmp_path):
     run_pipeline(session, params={"motion": {"strategy": "table"}})
     m = session.result("motion")
     assert not m.failure and m.strategy == "table" and not m.alternatives  # the handover was not tried
-    spans = held_spans(m)
-    assert len(spans) == 5 and spans[::2] == [-1, -1, -1] and min(spans[1], spans[3]) >= 0 and spans[1] != spans[3], spans
-    bad = motion_collisions(session, m)
-    assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
+    first, second = moved_through_a_placement(session, m)
+    assert m.holder[first[0]] != m.holder[second[0]]
 
 
 def _motion(phases: list[int], names: tuple, **extra) -> Motion:

@@ -255,7 +255,8 @@ def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int =
                 start = time.perf_counter()
                 motion, seconds = plan_motion(scene, results["pick_grasps"], results["place_grasps"], results["double_grasps"],
                                               results["roadmap"], MotionParams(planner=planner, strategy="handover"),
-                                              np.random.default_rng(step_seed(seed, "motion")))
+                                              np.random.default_rng(step_seed(seed, "motion")),
+                                              configs=(results["grasp_configs"], step_named("grasp_configs").make_params()))
                 timed.append((time.perf_counter() - start, seconds))
             elapsed, seconds = min(timed, key=lambda run: run[0])
             failed = next((why for why in motion.tried if why), "")

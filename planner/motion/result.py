@@ -10,9 +10,10 @@ from planner.core.results import array
 from planner.motion.phase import Phase
 
 PHASES = tuple(phase.title for phase in Phase)[:4]  # a handover's Table I rows (the paper's), in the order of the stored integers
-TABLE_PHASES = tuple(phase.title for phase in Phase)  # a table handover's: those and Set down, Regrasp
+TABLE_PHASES = tuple(phase.title for phase in Phase)  # a table handover's or a same-hand regrasp's: those and Set down, Regrasp
 PLANNERS = ("roadmap", "rrt")
-STRATEGIES = {"auto": ("handover", "table"), "handover": ("handover",), "table": ("table",)}  # strategy -> those tried, in order
+STRATEGIES = {"auto": ("handover", "table", "regrasp"), "handover": ("handover",), "table": ("table",),
+              "regrasp": ("regrasp",)}  # strategy -> those the regrasp graph may use
 PHASE_SECONDS = ("planning", "validating", "reconnecting", "shortcutting", "contact")  # the step's stage seconds per phase,
 # in this order, then one for timing and sampling
 
@@ -51,15 +52,13 @@ class MotionParams:
     contact_env_clearance: float = bounded(0.004, 0.0, 0.05, "m", "... and this far between checks")
     contact_penetration: float = bounded(0.001, 1e-5, 0.01, "m", "hand-object pairs touch at most this deep between checks (0 at them)")
     contact_coarse: int = bounded(3, 1, 100, "(factor)", "contact checks at every k-th configuration with k-times margins first (1: dense)")
-    strategy: str = described("auto", "handover: a double grasp; table: set down for the other hand; auto: handover, else table",
-                              tuple(STRATEGIES))
-    table_placements: int = bounded(6, 1, 1000, "placements", "table: intermediate placements both arms reach tried, best first")
-    table_candidates: int = bounded(16, 1, 1000, "motions", "table: (placement, pick grasp, place grasp) motions tried in all")
-    placement_spacing: float = bounded(0.1, 0.01, 1.0, "m", "table: grid spacing of the positions on each support")
-    placement_headings: int = bounded(4, 1, 64, "headings", "table: headings per position and resting pose")
-    placement_min_probability: float = bounded(0.05, 0.0, 1.0, "(probability)", "table: resting poses less likely are left out")
-    placement_seeds: int = bounded(8, 1, 1000, "IK starts", "table: IK starts per arm and position, to find which arm reaches it")
-    placement_tolerance: float = bounded(0.02, 0.001, 0.2, "m", "table: reach brings the fingertip centre this near the centre of mass")
+    strategy: str = described("auto", "handover: double grasp; table: set down for the other hand; regrasp: retaken by the same "
+                              "hand; auto: cheapest", tuple(STRATEGIES))
+    contact_seconds: float = bounded(1.0, 0.0, 60.0, "s", "regrasp graph: each contact motion's estimated time (transits: joint "
+                                     "distance over max_velocity)")
+    regrasp_grasps: int = bounded(8, 1, 1000, "grasps", "table, regrasp: each hand's grasps tried at a placement, best scored first")
+    table_placements: int = bounded(6, 1, 1000, "placements", "table, regrasp: intermediate placements the arms reach tried, best first")
+    table_candidates: int = bounded(16, 1, 1000, "motions", "table, regrasp: (placement, pick grasp, place grasp) motions tried, each")
 
     def problem(self) -> str:
         """What is wrong with the values, naming the parameter ('' when nothing): checked before the step runs."""
@@ -102,9 +101,12 @@ the names of q's columns;
     keyframes: np.ndarray = array("int64", (5,))
     joint_names: tuple = ()  # the robot's joints in q's column order (absent from sessions older than it: see joint_names_of)
     phase_names: tuple = PHASES  # what `phase` and the rows of `phases` index (a table handover's are TABLE_PHASES)
-    strategy: str = "handover"  # the one that moved: 'handover' (a double grasp, or a direct transfer) or 'table'
-    alternatives: tuple = ()  # the strategies tried before it (all of them when none worked): {"strategy", "failure"}
-    intermediate: tuple = ()  # a table handover's intermediate placement: the object's pose, 4 rows of 4 (empty: none)
+    strategy: str = "handover"  # the one that moved: 'handover' (a double grasp, or a direct transfer), 'table' or 'regrasp'
+    alternatives: tuple = ()  # the other strategies (all of them when none worked): {"strategy", "failure": the stage that
+    # removed it}
+    intermediate: tuple = ()  # a table handover's or regrasp's intermediate placement: the object's pose, 4 rows of 4 (empty: none)
+    sequence: tuple = ()  # the regrasp graph's sequence that moved: per transition {"kind", "hand", "grasps", "grasp", "at",
+    # "seconds" (estimated), "double_grasp" (a handover's)}; empty in sessions older than it
 
     @property
     def duration(self) -> float:

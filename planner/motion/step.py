@@ -1,7 +1,8 @@
-"""The motion step (paper V-B): the whole task as one trajectory, the double grasps tried best first, then (by the
-`strategy` parameter) a table handover through an intermediate placement (strategies.py).
+"""The motion step (paper V-B): the whole task as one trajectory, the regrasp graph's sequences cheapest first (a
+handover through a double grasp, a table handover or a same-hand regrasp; the `strategy` parameter says which may be
+used: strategies.py).
 
-Each candidate is planned by its stages (double_grasp.py, table_handover.py); the first whose every piece is valid is
+Each sequence is planned by its stages (double_grasp.py, table_handover.py); the first whose every piece is valid is
 smoothed and timed (smoothing.py) and sampled at a fixed rate (sampling.py). Measurements (seconds per phase and part) go to the
 step's session record, never into the result, so the result depends on the inputs and the seed only.
 """
@@ -27,11 +28,12 @@ from planner.motion.double_grasp import DoubleGraspPlanner
 from planner.motion.graph import MotionGraph
 from planner.motion.phase import Phase
 from planner.motion.piece import TRANSIT_PARTS, Piece
-from planner.motion.result import PHASES, STRATEGIES, TABLE_PHASES, Motion, MotionParams
+from planner.motion.result import PHASES, TABLE_PHASES, Motion, MotionParams
 from planner.motion.sampling import sample
 from planner.motion.smoothing import Smoother
 from planner.motion.strategies import Attempt
 from planner.motion.validities import Validities
+from planner.regrasp.placements import Placements
 from planner.roadmap.result import Roadmap
 
 GRASP, CARRY, PLACE, REST, SET_DOWN, REGRASP = Phase
@@ -59,19 +61,20 @@ def collector_paused() -> Iterator[None]:
 
 def plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps, roadmap: Roadmap, p: MotionParams,
                 rng: np.random.Generator, progress: Progress = no_progress,
-                configs: tuple[GraspConfigs, GraspConfigParams] | None = None) -> tuple[Motion, list[float]]:
+                configs: tuple[GraspConfigs, GraspConfigParams] | None = None, placements: Placements | None = None
+                ) -> tuple[Motion, list[float]]:
     """(the motion, its stage seconds): the first strategy (strategies.py) whose whole motion is valid; `configs` (the
-    grasp configurations and their parameters) let the table handover be tried."""
+    grasp configurations and their parameters) and `placements` let the table handover be tried."""
     problem = p.problem()
     if problem:
         raise ValueError(f"motion.{problem}")
     with collector_paused():
-        return _plan_motion(scene, pick, place, dg, roadmap, p, rng, progress, configs)
+        return _plan_motion(scene, pick, place, dg, roadmap, p, rng, progress, configs, placements)
 
 
 def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps, roadmap: Roadmap, p: MotionParams,
-                 rng: np.random.Generator, progress: Progress, configs: tuple[GraspConfigs, GraspConfigParams] | None
-                 ) -> tuple[Motion, list[float]]:
+                 rng: np.random.Generator, progress: Progress, configs: tuple[GraspConfigs, GraspConfigParams] | None,
+                 placements: Placements | None) -> tuple[Motion, list[float]]:
     robot = scene.robot
     cm = build_collision_model(robot, scene.environment)
     transit = transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding)
@@ -81,25 +84,18 @@ def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGras
     def make() -> DoubleGraspPlanner:
         return DoubleGraspPlanner(scene, Validities(scene, cm, transit, contact), graph, p, rng, baseline=p.planner == "rrt")
 
-    rejected: list[Attempt] = []
-    for name in STRATEGIES[p.strategy]:
-        attempt = (strategies.handover(make, pick, place, dg, p, progress) if name == "handover" else
-                   strategies.table(make, scene, pick, place, configs, p, rng, progress))
-        if attempt.pieces is not None:
-            break
-        rejected.append(attempt)
+    attempt = strategies.plan_sequences(make, scene, pick, place, dg, configs, placements, p, rng, progress)
     resolution = {"transit": transit.describe(), "contact": contact.describe(),
                   "bound": "largest displacement of any robot or carried-object point, relative to what it may hit, between two "
                            "checks (coarse times that between two checks that found nothing within coarse times a padding's "
                            "margin over its clearance)"}
-    alternatives = tuple({"strategy": r.strategy, "failure": r.failure} for r in rejected)
+    alternatives = tuple(attempt.alternatives)
     if attempt.pieces is None:
-        failure = "; ".join(f"{r.strategy} strategy: {r.failure}" for r in rejected)
         nq = robot.nq
-        return Motion(p.planner, -1, [w for r in rejected for w in r.tried], [], list(robot.spec.arm_names), resolution,
-                      [s for r in rejected for s in r.stages], failure, np.zeros(0), np.zeros((0, nq)), np.zeros(0, np.int8),
-                      np.zeros((0, 4, 4)), np.zeros(0, np.int8), np.zeros(0, np.int8), np.zeros((0, 2, 3)), np.zeros(5, np.int64),
-                      tuple(robot.joint_names()), alternatives=alternatives), [x for r in rejected for x in r.seconds]
+        return Motion(p.planner, -1, attempt.tried, [], list(robot.spec.arm_names), resolution, attempt.stages, attempt.failure,
+                      np.zeros(0), np.zeros((0, nq)), np.zeros(0, np.int8), np.zeros((0, 4, 4)), np.zeros(0, np.int8),
+                      np.zeros(0, np.int8), np.zeros((0, 2, 3)), np.zeros(5, np.int64), tuple(robot.joint_names()),
+                      alternatives=alternatives), attempt.seconds
     t = time.perf_counter()
     motion = _sampled(scene, attempt, p, resolution, rng, alternatives)
     names = len(motion.phase_names)
@@ -139,7 +135,7 @@ def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, 
                                   for marks in (((GRASP, "closing"),), ((CARRY, "closing"), (REGRASP, "closing")),
                                                 ((PLACE, "set-down"),)))
     key = [0, grasped, placed if exchanged is None else exchanged, placed, len(q) - 1]  # a direct transfer: no exchange
-    names = TABLE_PHASES if attempt.strategy == "table" else PHASES
+    names = PHASES if attempt.strategy == "handover" else TABLE_PHASES
     dt = 1.0 / p.rate
     t = np.arange(len(q)) * dt
     table = [_phase_row(i, planner.stats[i], q, phase_arr, dt, [pc for pc in pieces if pc.phase == i],
@@ -159,7 +155,7 @@ def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, 
     intermediate = () if attempt.intermediate is None else tuple(tuple(float(x) for x in row) for row in attempt.intermediate)
     return Motion(p.planner, attempt.used, attempt.tried, table, arms, resolution, stages, "", t, q, phase_arr, np.array(poses),
                   np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64),
-                  tuple(robot.joint_names()), names, attempt.strategy, alternatives, intermediate)
+                  tuple(robot.joint_names()), names, attempt.strategy, alternatives, intermediate, tuple(attempt.sequence))
 
 
 def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: list[Piece], smoothing_checks: int, name: str) -> dict:
@@ -181,10 +177,10 @@ def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: 
 def run(ctx: StepContext) -> StepOutput:
     i = ctx.inputs
     motion, seconds = plan_motion(ctx.scene, i["pick_grasps"], i["place_grasps"], i["double_grasps"], i["roadmap"], ctx.params,
-                                  ctx.rng, ctx.progress, (i["grasp_configs"], ctx.input_params["grasp_configs"]))
+                                  ctx.rng, ctx.progress, (i["grasp_configs"], ctx.input_params["grasp_configs"]), i["placements"])
     return StepOutput(motion, tuple(seconds))
 
 
 NAME = "motion"
 STEP = Step(NAME, "the whole task's motion: Grasp, Carry, Place, Rest on the Super Graph (V-B)",
-            ("pick_grasps", "place_grasps", "grasp_configs", "double_grasps", "roadmap"), MotionParams, Motion, run)
+            ("pick_grasps", "place_grasps", "grasp_configs", "double_grasps", "roadmap", "placements"), MotionParams, Motion, run)

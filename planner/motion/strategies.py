@@ -1,15 +1,17 @@
-"""The motion's strategies, tried in the order the `strategy` parameter gives (auto: the handover, then the table).
+"""The motion's strategies: the regrasp graph's sequences (planner/regrasp/graph.py), cheapest first, each planned
+until one moves.
 
-Handover: the double grasps best first (double_grasp.py), the paper's plan, or a direct transfer. Table: the picking
-hand sets the object down at an intermediate placement both arms reach, and the placing hand takes it there
-(table_handover.py); the placements (planner/regrasp/placements.py) and the configurations there
-(planner/regrasp/table_configs.py) are computed only when the table is tried. Each attempt says why every candidate
-it tried failed, and, when none worked, the stage that removed them.
+Handover: a double grasp (double_grasp.py: the paper's plan, or a direct transfer). Table: the picking hand sets the
+object down at an intermediate placement and the placing hand takes it there; regrasp: one arm picks and places,
+setting the object down on the way and taking it again in another grasp (both table_handover.py). The `strategy`
+parameter says which the graph may use (auto: all three). Each sequence tried and failed says why; a strategy with
+none tried says the stage that removed it: ruled out before the search (no double grasp, no placement, the arms),
+no sequence in the graph (the configurations at the placements), or dearer than the one that moved.
 """
 from __future__ import annotations
 
 import time
-from collections import Counter
+from collections import Counter, defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -23,25 +25,29 @@ from planner.model.task import Scene
 from planner.motion.double_grasp import DoubleGraspPlanner
 from planner.motion.phase import Phase
 from planner.motion.piece import HandGrasp, Piece, PieceFailed
-from planner.motion.result import MotionParams
+from planner.motion.result import STRATEGIES, MotionParams
 from planner.motion.table_handover import plan_table
-from planner.regrasp.placements import PlacementParams, stable_placements
-from planner.regrasp.table_configs import table_candidates
+from planner.regrasp.graph import HANDOVER, REGRASP, TABLE, CostModel, Search, Sequence
+from planner.regrasp.placements import Placements
+from planner.regrasp.task_graph import Limits, TaskGraph
 
 
 @dataclass
 class Attempt:
-    """What one strategy made: the pieces of the candidate that worked (None: none did), the planner that made them,
-    why each candidate tried failed ('' for the one used), the failure naming the stage, the double grasp's rank
-    (-1: none), the intermediate placement (a table handover), and the stages of the search with their seconds."""
+    """What the strategies made: the pieces of the sequence that worked (None: none did), the planner that made them,
+    why each sequence tried failed ('' for the one used), the failure naming the stage per strategy, the double grasp's
+    rank (-1: none), the intermediate placement, the sequence used, the other strategies with the stage that removed
+    them, and the search's stages with their seconds."""
 
-    strategy: str
+    strategy: str = ""
     tried: list[str] = field(default_factory=list)
     pieces: list[Piece] | None = None
     planner: DoubleGraspPlanner | None = None
     failure: str = ""
     used: int = -1
     intermediate: np.ndarray | None = None
+    sequence: list[dict] = field(default_factory=list)
+    alternatives: list[dict] = field(default_factory=list)
     stages: list[dict] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)
 
@@ -51,87 +57,166 @@ def hand_grasp(grasps: GraspList, rank: int) -> HandGrasp:
                      [f for f, m in zip(grasps.fingers, grasps.contact_mask[rank]) if m])
 
 
-def handover(make: Callable[[], DoubleGraspPlanner], pick: GraspList, place: GraspList, dg: DoubleGrasps, p: MotionParams,
-             progress: Progress) -> Attempt:
-    """The first double grasp, best first, whose whole motion is valid."""
-    out = Attempt("handover")
-    if dg.failure or not len(dg):
-        out.failure = f"double grasps: {dg.failure or 'none to move with'}"
-        return out
-    count = min(len(dg), p.max_double_grasps)
-    for k in range(count):
-        progress(k / max(count, 1), f"double grasp {k + 1} of {count}")
-        planner = make()
-        try:
-            pieces = planner.plan(dg.q_grasp[k], dg.q_exch[k], dg.q_place[k], hand_grasp(pick, int(dg.pick_rank[k])),
-                                  hand_grasp(place, int(dg.place_rank[k])))
-        except PieceFailed as exc:
-            out.tried.append(str(exc))
+def ruled_out(dg: DoubleGrasps, configs: GraspConfigs | None, placements: Placements | None, allowed: tuple[str, ...]
+              ) -> dict[str, str]:
+    """strategy -> the stage that removes it before any search, for the strategies allowed."""
+    out = {}
+    if HANDOVER in allowed and (dg.failure or not len(dg)):
+        out[HANDOVER] = f"double grasps: {dg.failure or 'none to move with'}"
+    elif HANDOVER in allowed and configs is None:
+        out[HANDOVER] = "grasp configurations: not given to the motion planner"
+    for name in (TABLE, REGRASP):
+        if name not in allowed:
             continue
-        out.tried.append("")
-        out.pieces, out.planner, out.used = pieces, planner, k
-        return out
-    out.failure = f"motion: no valid motion for any of the {count} double grasps tried: " + "; ".join(
-        f"{i + 1}: {why}" for i, why in enumerate(out.tried))
+        if configs is None or placements is None:
+            out[name] = "grasp configurations and placements: not given to the motion planner"
+        elif name == TABLE and configs.picking_arm == configs.placing_arm:
+            out[name] = f"arms: the {configs.picking_arm} arm picks and places, so no other hand takes the object"
+        elif name == REGRASP and configs.picking_arm != configs.placing_arm:
+            out[name] = (f"arms: the {configs.picking_arm} arm picks and the {configs.placing_arm} arm places; a same-hand "
+                         "regrasp needs one arm that does both")
+        elif not len(placements) or not placements.reached[:, [placements.arms.index(configs.picking_arm),
+                                                               placements.arms.index(configs.placing_arm)]].all(axis=1).any():
+            counts = "; ".join(f"{s['stage']}: {s['count']}" for s in placements.stages)
+            out[name] = f"placements: none that {'both arms reach' if name == TABLE else 'the arm reaches'} ({counts})"
     return out
 
 
-def table(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList, place: GraspList,
-          configs: tuple[GraspConfigs, GraspConfigParams] | None, p: MotionParams, rng: np.random.Generator,
-          progress: Progress) -> Attempt:
-    """The first (intermediate placement, pick grasp, place grasp), best first, whose whole motion is valid: at most
-    `table_candidates` tried, spread evenly over the first `table_placements` placements; a pick grasp whose Grasp or
-    Set down failed at a placement is not tried there again with another place grasp (they change neither), nor a place
-    grasp whose Carry, Place or Rest failed (carried from a placement that both arms reach to the final one, the next
-    place grasp is likelier to get there than the next placement)."""
-    out = Attempt("table")
-    if configs is None:
-        out.failure = "grasp configurations: not given to the motion planner"
-        return out
-    progress(0.0, "stable placements of the object")
-    placements, seconds = stable_placements(scene, PlacementParams(p.placement_spacing, p.placement_headings,
-                                                                   p.placement_min_probability, p.placement_seeds,
-                                                                   p.placement_tolerance), progress)
+class Skips:
+    """Sequences not planned because one like them failed where they are the same: a pick grasp that failed before the
+    other hand took the object is not tried again at that placement (the place grasp changes neither), a place grasp
+    that failed carrying or placing not again (the next place grasp is likelier to get there than the next
+    placement); at most `per_placement` motions per intermediate placement, so the tries spread over them."""
+
+    def __init__(self, per_placement: int):
+        self.per_placement = per_placement
+        self.at: Counter = Counter()
+        self.before_take: set[tuple[int, int]] = set()
+        self.carrying: set[int] = set()
+
+    def skip(self, seq: Sequence) -> bool:
+        if seq.strategy == HANDOVER:
+            return False
+        k, r, s = seq.transitions[1].target.at, seq.transitions[0].target.grasp, seq.transitions[2].target.grasp
+        return self.at[k] >= self.per_placement or (k, r) in self.before_take or s in self.carrying
+
+    def failed(self, seq: Sequence, exc: PieceFailed) -> None:
+        if seq.strategy == HANDOVER:
+            return
+        k, r, s = seq.transitions[1].target.at, seq.transitions[0].target.grasp, seq.transitions[2].target.grasp
+        self.at[k] += 1
+        if exc.phase in (Phase.GRASP, Phase.SET_DOWN):
+            self.before_take.add((k, r))
+        elif exc.phase != Phase.REGRASP:
+            self.carrying.add(s)
+
+
+def plan_sequences(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps,
+                   configs: tuple[GraspConfigs, GraspConfigParams] | None, placements: Placements | None, p: MotionParams,
+                   rng: np.random.Generator, progress: Progress) -> Attempt:
+    """The cheapest sequence of the regrasp graph whose whole motion is valid (see the module): at most
+    `max_double_grasps` handovers and `table_candidates` table handovers or regrasps planned."""
+    allowed = STRATEGIES[p.strategy]
+    out = Attempt()
+    removed = ruled_out(dg, configs[0] if configs else None, placements, allowed)
     started = time.perf_counter()
-    out.stages, out.seconds = list(placements.stages), list(seconds)
-    grasp_configs, params = configs
-    if configs[0].picking_arm == configs[0].placing_arm:
-        out.failure = f"arms: the {grasp_configs.picking_arm} arm picks and places, so no other hand takes the object"
-        return out
-    dropped: Counter = Counter()
-    per_placement = -(-p.table_candidates // p.table_placements)  # tries spread over the placements
-    failed_here: Counter = Counter()
-    failed_before_regrasp: set[tuple[int, int]] = set()  # (placement, pick grasp) whose failure no place grasp changes
-    failed_carrying: set[int] = set()  # place grasps that failed in Carry, Place or Rest
-    for c in table_candidates(scene, pick, place, grasp_configs, params, placements, p.table_placements, dropped, rng):
-        if len(out.tried) >= p.table_candidates:
-            break
-        if (failed_here[c.placement] >= per_placement or (c.placement, c.pick_rank) in failed_before_regrasp
-                or c.place_rank in failed_carrying):
-            continue
-        progress(len(out.tried) / p.table_candidates, f"table handover {len(out.tried) + 1}: placement {c.placement + 1}")
-        planner = make()
+    graph = None
+    if set(allowed) - set(removed):
+        limits = Limits(p.max_double_grasps, p.table_placements, p.regrasp_grasps)
+        # its own stream, spawned from the motion's without drawing from it: a handover draws as it did before the graph
+        graph = TaskGraph(scene, pick, place, configs[0], configs[1], dg, placements, limits, set(allowed) - set(removed),
+                          rng.spawn(1)[0])
+    costs = CostModel(p.max_velocity, p.contact_seconds)
+    search = Search(costs, graph.expand if graph else lambda node, path: [], scene.q_initial, scene.q_final,
+                    graph.remaining if graph else lambda node: 0)
+    budget = {HANDOVER: p.max_double_grasps, TABLE: p.table_candidates, REGRASP: p.table_candidates}
+    tried: dict[str, list[str]] = defaultdict(list)
+    skips = Skips(-(-p.table_candidates // p.table_placements))
+    popped, chosen, planning = 0, None, 0.0
+    done: set[str] = set()  # the handover, once its double grasps are tried
+
+    def attempt(seq: Sequence) -> bool:
+        """Plan the sequence; whether it moved."""
+        nonlocal chosen, planning
+        name = seq.strategy
+        progress(sum(map(len, tried.values())) / sum(budget[s] for s in allowed),
+                 f"{name} sequence {len(tried[name]) + 1} ({seq.seconds:.1f} s estimated)")
+        planner, t = make(), time.perf_counter()
         try:
-            pieces = plan_table(planner, c.q_grasp, c.q_set, c.q_take, c.q_place, hand_grasp(pick, c.pick_rank),
-                                hand_grasp(place, c.place_rank), c.pose)
+            pieces = _plan(planner, seq, pick, place, dg, placements)
         except PieceFailed as exc:
-            out.tried.append(f"placement {c.placement + 1} on {placements.support[c.placement]}, grasps {c.pick_rank + 1} and "
-                             f"{c.place_rank + 1}: {exc}")
-            failed_here[c.placement] += 1
-            if exc.phase in (Phase.GRASP, Phase.SET_DOWN):
-                failed_before_regrasp.add((c.placement, c.pick_rank))
-            elif exc.phase != Phase.REGRASP:  # the place grasp's part, carried to the final placement and placed there
-                failed_carrying.add(c.place_rank)
-            continue
+            tried[name].append(f"{_describe(seq, placements)}: {exc}")
+            out.tried.append(tried[name][-1])
+            skips.failed(seq, exc)
+            return False
+        finally:
+            planning += time.perf_counter() - t
         out.tried.append("")
-        out.pieces, out.planner, out.intermediate = pieces, planner, c.pose
-        break
-    why = "; ".join(f"{n} {reason}" for reason, n in sorted(dropped.items()))
-    out.stages.append({"stage": "table handovers", "count": len(out.tried), "note": why or "every candidate tried"})
-    out.seconds.append(time.perf_counter() - started)
-    if out.pieces is None:
-        counts = "; ".join(f"{s['stage']}: {s['count']}" for s in out.stages)
-        out.failure = (f"table: no valid motion for any of the {len(out.tried)} table handovers tried: " + "; ".join(
-            f"{i + 1}: {w}" for i, w in enumerate(out.tried)) if out.tried else
-            f"table: no intermediate placement where one hand sets the object down and the other takes it ({counts})")
+        chosen = seq
+        out.pieces, out.planner, out.strategy, out.sequence, out.used = pieces, planner, name, seq.describe(), seq.transitions[1].rank
+        if name != HANDOVER:
+            out.intermediate = placements.pose[seq.transitions[1].target.at]
+        return True
+
+    turn = 0.0  # the estimate at which the strategy that moved had its turn
+    for seq in search.sequences():
+        popped += 1
+        name, turn = seq.strategy, seq.seconds
+        if all(s in done or len(tried[s]) >= budget[s] for s in allowed if s not in removed):
+            break
+        if name in done or len(tried[name]) >= budget[name] or skips.skip(seq):
+            continue
+        if name == HANDOVER:  # its turn comes at its cheapest estimate; then every double grasp in the paper's order
+            block = [Sequence.of(costs, scene.q_initial, graph.handover_edges(k)) for k in range(min(len(dg), budget[name]))]
+            if any(attempt(s) for s in block):
+                break
+            done.add(name)
+            continue
+        if attempt(seq):
+            break
+    made = graph.made if graph else {}
+    dropped = "; ".join(f"{n} {why}" for why, n in sorted(search.dropped.items()))
+    out.stages = [{"stage": "regrasp graph", "count": popped, "note": f"sequences popped, cheapest first; {search.expanded} nodes "
+                   f"expanded, {sum(v is not None for v in made.values())} of {len(made)} configurations at intermediate "
+                   f"placements found" + (f"; dropped: {dropped}" if dropped else "")},
+                  {"stage": "sequences planned", "count": len(out.tried),
+                   "note": ", ".join(f"{len(tried[s]) + (s == out.strategy)} {s}" for s in allowed if s not in removed) or "none"}]
+    out.seconds = [time.perf_counter() - started - planning, planning]
+    for name in allowed:
+        if name == out.strategy:
+            continue
+        if name in removed:
+            why = removed[name]
+        elif tried[name]:
+            why = f"motion: no valid motion for any of the {len(tried[name])} sequences tried: " + "; ".join(
+                f"{i + 1}: {w}" for i, w in enumerate(tried[name]))
+        elif chosen is not None:
+            why = f"dearer: none estimated below {turn:.1f} s, where the {chosen.strategy} strategy's turn came"
+        else:
+            why = f"regrasp graph: no sequence ({dropped or 'no configuration to move through'})"
+        out.alternatives.append({"strategy": name, "failure": why})
+    if chosen is None:
+        out.failure = "; ".join(f"{a['strategy']} strategy: {a['failure']}" for a in out.alternatives)
     return out
+
+
+def _plan(planner: DoubleGraspPlanner, seq: Sequence, pick: GraspList, place: GraspList, dg: DoubleGrasps,
+          placements: Placements | None) -> list[Piece]:
+    """Every piece of the sequence's motion."""
+    t = seq.transitions
+    if seq.strategy == HANDOVER:  # pick, hand over (or carry it: a direct transfer), place
+        k = t[1].rank
+        return planner.plan(dg.q_grasp[k], dg.q_exch[k], dg.q_place[k], hand_grasp(pick, int(dg.pick_rank[k])),
+                            hand_grasp(place, int(dg.place_rank[k])))
+    # pick, set down, take, carry, place
+    return plan_table(planner, t[0].q, t[1].q, t[2].q, t[3].q, hand_grasp(pick, t[0].target.grasp),
+                      hand_grasp(place, t[2].target.grasp), placements.pose[t[1].target.at])
+
+
+def _describe(seq: Sequence, placements: Placements | None) -> str:
+    t = seq.transitions
+    if seq.strategy == HANDOVER:
+        return f"double grasp {t[1].rank + 1} ({seq.seconds:.1f} s estimated)"
+    k = t[1].target.at
+    return (f"{seq.strategy} through placement {k + 1} on {placements.support[k]}, grasps {t[0].target.grasp + 1} and "
+            f"{t[2].target.grasp + 1} ({seq.seconds:.1f} s estimated)")

@@ -1,4 +1,5 @@
-"""Stable placements of the object on the scene's supports: where a hand may set it down for the other to take it.
+"""The placements step: stable placements of the object on the scene's supports, where a hand may set it down for the
+other hand (or itself, in another grasp) to take it.
 
 The object's resting poses (those of the task's placements, where it rests and the grasps were chosen for, then
 trimesh's `compute_stable_poses`: the convex hull's faces the centre of mass projects into, with the probability of
@@ -7,7 +8,9 @@ obstacle: the desk top, a shelf) on a grid of positions, at several headings. A 
 there is clear of every other obstacle and of the robot's fixed base; each arm's reach of its centre of mass is
 recorded (reach.py: the fingertip centre brought there by the arm and the torso, collision-free). The stages say how
 many were dropped and why. Ordered for the table handover: both arms reaching first, then by the distance the object
-travels from its initial placement through it to its final one, then the more probable resting pose first.
+travels from its initial placement through it to its final one, then the more probable resting pose first. A step of
+its own (needing only the scene) so the motion's strategies read one list, a session keeps it and the workbench draws
+it; an empty list fails nothing (the handover needs none).
 """
 from __future__ import annotations
 
@@ -19,9 +22,10 @@ from planner.collision.checker import build_collision_model
 from planner.collision.hand_placement import ObstacleTest
 from planner.collision.object_obstacle import ObjectCollision
 from planner.collision.shapes import coal_mesh
+from planner.core.bounds import bounded
 from planner.core.results import array
 from planner.core.stages import StageLog
-from planner.core.steps import Progress, no_progress
+from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progress
 from planner.handover.reach import reach
 from planner.model.environment import Obstacle
 from planner.model.task import Scene
@@ -32,13 +36,13 @@ LIFTED = 0.001  # m: the object is checked this far above its support (resting o
 
 @dataclass(frozen=True)
 class PlacementParams:
-    """How the placements are searched (the motion step's parameters carry them)."""
+    """How the placements are searched."""
 
-    spacing: float  # m between grid positions on a support
-    headings: int  # headings per position and resting pose
-    min_probability: float  # resting poses less likely are left out
-    seeds: int  # IK starts per arm and position for reach
-    tolerance: float  # m: the fingertip centre to the centre of mass, at most
+    spacing: float = bounded(0.15, 0.01, 1.0, "m", "grid spacing of the positions on each support")
+    headings: int = bounded(4, 1, 64, "headings", "headings per position and resting pose")
+    min_probability: float = bounded(0.05, 0.0, 1.0, "(probability)", "resting poses less likely are left out")
+    seeds: int = bounded(4, 1, 1000, "IK starts", "IK starts per arm and position, to find which arm reaches it")
+    tolerance: float = bounded(0.02, 0.001, 0.2, "m", "reach brings the fingertip centre this near the centre of mass")
 
 
 @dataclass(frozen=True)
@@ -54,6 +58,11 @@ class Placements:
 
     def __len__(self) -> int:
         return len(self.probability)
+
+    def stats(self) -> dict:
+        reached = {f"reached_by_{arm}": int(self.reached[:, k].sum()) for k, arm in enumerate(self.arms)}
+        return {"placements": len(self), "supports": sorted(set(self.support)), **reached,
+                "reached_by_both": int(self.reached.all(axis=1).sum()) if len(self) else 0}
 
 
 def resting_poses(scene: Scene, min_probability: float) -> tuple[list[np.ndarray], list[float]]:
@@ -160,3 +169,13 @@ def stable_placements(scene: Scene, p: PlacementParams, progress: Progress = no_
                       np.array([clear[i][1] for i in order]).reshape(-1, 4, 4), np.array([clear[i][2] for i in order]),
                       flags_arr[order].reshape(-1, len(arms))), log.seconds
 
+
+
+def run(ctx: StepContext) -> StepOutput:
+    placements, seconds = stable_placements(ctx.scene, ctx.params, ctx.progress)
+    return StepOutput(placements, tuple(seconds))
+
+
+NAME = "placements"
+STEP = Step(NAME, "stable placements of the object on the supports, and which arm reaches each (issue 36)", (), PlacementParams,
+            Placements, run)

@@ -79,7 +79,7 @@ class TaskOutcome:
     double_grasps: int | None
     motion_duration: float | None  # s, the timed trajectory
     path_length: float | None  # rad, summed over the joints
-    strategy: str = ""  # the motion's ('handover', 'table'); empty when it did not move (suites written before it too)
+    strategy: str = ""  # the motion's ('handover', 'table', 'regrasp'); empty when it did not move (suites written before it too)
 
     def to_json(self) -> dict[str, Any]:
         return {"id": self.id, "success": self.success, "failed_step": self.failed_step, "failed_stage": self.failed_stage,

@@ -8,6 +8,7 @@ from .exchange import ExchangeLayer
 from .grasp_configs import GraspConfigsLayer
 from .grasps import PickGraspsLayer, PlaceGraspsLayer
 from .motion import MotionLayer
+from .placements import PlacementsLayer
 from .roadmap import RoadmapLayer
 
 LAYERS: dict[str, type[StepLayer]] = {
@@ -17,5 +18,6 @@ LAYERS: dict[str, type[StepLayer]] = {
     "exchange": ExchangeLayer,
     "double_grasps": DoubleGraspsLayer,
     "roadmap": RoadmapLayer,
+    "placements": PlacementsLayer,
     "motion": MotionLayer,
 }

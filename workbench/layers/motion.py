@@ -31,6 +31,7 @@ from .stages import FAILURE_COLOR
 TIMELINE = "motion: the timeline's sample"  # what "Robot at" says when the timeline posed the robot
 ROUTE_THICKNESS = 0.004  # m: each wrist's route
 TRAIL_THICKNESS = 0.008  # m: the object's trail
+STRATEGY_TITLES = {"table": "Table handover", "regrasp": "Same-hand regrasp"}  # the strategies through an intermediate placement
 TRAJECTORY_FORMATS = ("JSON", "CSV")  # the trajectory downloads (planner/motion/trajectory_file.py), by the button's label
 
 
@@ -150,13 +151,16 @@ class MotionLayer(StepLayer):
 
     def summary(self, result: Motion) -> str:
         """Which double grasp moved, the routes' colours, Table I and the failure (red)."""
-        if result.strategy == "table" and len(result.t):
-            used = f"Table handover: candidate **{len(result.tried)}**, through an intermediate placement"
+        if result.strategy in STRATEGY_TITLES and len(result.t):
+            used = f"{STRATEGY_TITLES[result.strategy]}: sequence **{len(result.tried)}** tried, through an intermediate placement"
         else:
-            used = (f"Double grasp **{result.double_grasp + 1}** of {len(result.tried)} tried" if result.double_grasp >= 0
-                    else f"No double grasp worked ({len(result.tried)} tried)")
-        used += "".join(f"; the {plain(str(a.get('strategy', '?')))} strategy failed: {plain(str(a.get('failure', '')))}"
+            used = (f"Double grasp **{result.double_grasp + 1}**, sequence {len(result.tried)} tried" if result.double_grasp >= 0
+                    else f"Nothing moved ({len(result.tried)} sequences tried)")
+        used += "".join(f"; not the {plain(str(a.get('strategy', '?')))} strategy: {plain(str(a.get('failure', '')))}"
                         for a in result.alternatives if isinstance(a, dict))
+        steps = [f"{plain(str(t.get('kind', '?')))} {float(t.get('seconds', 0.0)):.1f} s" for t in result.sequence if isinstance(t, dict)
+                 and isinstance(t.get("seconds", 0.0), (int, float))]
+        used += f". Regrasp graph: {' → '.join(steps)} (estimated)" if steps else ""
         failed = [f"{k + 1}: {plain(why)}" for k, why in enumerate(result.tried) if why]
         text = (f"{used}; planner *{plain(result.planner)}*, {len(result.t)} samples, {result.duration:.2f} s.\n\n"
                 f"Routes (wrists thin, the object thick): " + ", ".join(
