@@ -13,6 +13,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from oracle import Oracle
 
@@ -604,9 +605,10 @@ def test_clearances_measure_exactly_the_pairs_nearer_than_far():
 
 
 @pytest.mark.parametrize("baseline", [False, True], ids=["roadmap", "rrt"])
-def test_transit_checks_count_every_collision_check_of_the_transit(example, monkeypatch, baseline):
+def test_transit_checks_and_pair_tests_count_every_check_of_the_transit(example, monkeypatch, baseline):
     """Table I's transit checks are every collision check a transit makes, counted apart from the planner's own tally:
-    each call of the collision checker while the transit runs. The example's Rest transit, from where the placing hand
+    each call of the collision checker while the transit runs; its pair tests, pinocchio's count of the pairs each
+    check's broad phase passed to the exact test. The example's Rest transit, from where the placing hand
     retreated (near the object: some pairs checked densely) to the final configuration."""
     from planner.collision.checker import CollisionChecker
     from planner.collision.situation import Situation
@@ -623,11 +625,20 @@ def test_transit_checks_count_every_collision_check_of_the_transit(example, monk
     goal = scene.q_final.copy()
     goal[hands] = start[hands]
     planner = _phase_planner(scene, roadmap, baseline)
-    calls = []
+    calls, tested = [], []
     check = CollisionChecker.in_collision
     monkeypatch.setattr(CollisionChecker, "in_collision", lambda self, *a, **k: calls.append(1) or check(self, *a, **k))
+    collide = pin.computeCollisions
+
+    def counted(*args):  # pinocchio's own count of the pairs its callback sent to the exact test
+        hit = collide(*args)
+        tested.extend(a.count for a in args if isinstance(a, pin.CollisionCallBackDefault))
+        return hit
+
+    monkeypatch.setattr(pin, "computeCollisions", counted)
     planner.stage(Phase.REST).transit(start, goal, Situation(None, scene.object_final))
     assert planner.stats[Phase.REST].checks == len(calls) > 2, (planner.stats[Phase.REST].checks, len(calls))
+    assert planner.stats[Phase.REST].pair_tests == sum(tested) >= len(calls) / 2, (planner.stats[Phase.REST].pair_tests, sum(tested))
 
 
 def test_the_carry_transit_can_use_the_roadmap_nodes(example):

@@ -209,6 +209,7 @@ class CollisionChecker:
         self._own_margins: np.ndarray | None = None
         self._last: tuple | None = None  # (subset, margins, screen) of the last check, while its setting is active
         self.checks = 0
+        self.pair_tests = 0  # pairs that reached the exact (narrow-phase) test: past the broad phase, active in the subset
 
     def _entry(self, subset: str | np.ndarray) -> tuple[np.ndarray, Screen | None, np.ndarray]:
         """(pair indices, screen, pair table) of a subset, made once."""
@@ -268,19 +269,19 @@ class CollisionChecker:
             for index, T in placed.items():
                 gd.oMg[index] = se3(T)
             manager.update(False)
-        if screen is None:
-            return bool(pin.computeCollisions(manager, True) if placed else
-                        pin.computeCollisions(self.model, self.data, manager, q, True))
         first = self._first
         hit = bool(pin.computeCollisions(manager, first) if placed else
                    pin.computeCollisions(self.model, self.data, manager, first, q))
-        if not hit or not screen.screening[first.collisionPairIndex]:
+        self.pair_tests += first.count
+        if screen is None or not hit or not screen.screening[first.collisionPairIndex]:
             return hit
         # a screening pair (the object's hull, which holds its mesh) is hit first: the subset's own pairs decide
         self._last = None
         self._subset(subset, margins, exact=True)
         manager.update(False)  # the boxes are inflated by the margins of the active pairs
-        return bool(pin.computeCollisions(manager, True))
+        hit = bool(pin.computeCollisions(manager, first))
+        self.pair_tests += first.count
+        return hit
 
     def colliding(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[int]:
         """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says

@@ -64,6 +64,7 @@ class TransitStats:
     rrt_calls: int = 0
     searches: int = 0
     checks: int = 0  # collision checks of the transits (their ends, connecting, validating, reconnecting, shortcutting)
+    pair_tests: int = 0  # of those checks' pairs, how many reached the exact test (a count of narrow-phase work)
 
 
 class TransitFailed(Exception):
