@@ -83,7 +83,8 @@ class TransitStage:
             raise PieceFailed(phase, part, str(exc)) from exc
         t = time.perf_counter()
         gain = tp.shortcut_min_gain
-        path = shortcut(shortcut_vertices(path, full, near, gain), full, near, self.rng, tp.shortcut_attempts, gain)
+        longest = np.inf if self.baseline or arm is not None else tp.graph_shortcut_length  # a graph path: see shortcut_vertices
+        path = shortcut(shortcut_vertices(path, full, near, gain, longest), full, near, self.rng, tp.shortcut_attempts, gain, longest)
         stats.seconds_shortcut += time.perf_counter() - t
         return Piece(phase, part, path, situation)
 
