@@ -34,8 +34,8 @@ class RoadmapParams:
     task_spread: float = bounded(0.25, 0.0, 3.0, "rad", "those nodes' Gaussian noise per joint around a site or a point between two")
     task_edge: float = bounded(1.0, 0.01, 20.0, "rad", "those nodes' longest edge to a nearer node (a query end joins them as cheaply)")
     task_neighbours: int = bounded(4, 1, 100, "edges", "edges joining each of those nodes to its nearest nodes")
-    site_starts: int = bounded(4, 0, 100, "IK starts", "random IK starts per site target besides the one that reached it")
-    bridge_attempts: int = bounded(8, 0, 1000, "edges", "nearest node pairs tried to join each smaller elementary component to "
+    site_starts: int = bounded(4, 0, 100, "IK starts", "random IK starts per site target around the initial configuration")
+    bridge_attempts: int = bounded(200, 0, 10000, "edges", "nearest node pairs tried to join each smaller elementary component to "
                                    "the rest (no longer than radius)")
 
     def problem(self) -> str:

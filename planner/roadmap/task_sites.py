@@ -20,12 +20,14 @@ from planner.roadmap.decomposition import Decomposition
 HEIGHTS = (0.05, 0.12)  # m: targets above the object's centre of mass at a placement, where pre-grasps, lifts and set-downs
 # bring the hand (at the centre itself the open hand would be in the support, closer than the roadmap's paddings)
 TOLERANCE = 0.03  # m: an IK solution counts when its fingertip centre comes this near its target
+SPREAD = 0.5  # rad: IK starts around the initial configuration (the online grasp configurations' arms are natural ones)
 
 
 def task_sites(scene: Scene, dec: Decomposition, checker: CollisionChecker, starts: int,
                rng: np.random.Generator) -> dict[str, np.ndarray]:
     """arm -> (k, sub-system dims) its sites' values of the common part and the arm (see the module), unchecked: the
-    roadmap keeps those free at its paddings; `starts` random IK starts per target besides the one that reached it.
+    roadmap keeps those free at its paddings; IK per target from the configuration that reached it, from the initial
+    one and from `starts` random ones around that.
     `checker`: the scene's model at the task check's paddings, which decide what each arm reaches."""
     robot = scene.robot
     reaches = placement_reach(scene, checker)
@@ -49,9 +51,10 @@ def task_sites(scene: Scene, dec: Decomposition, checker: CollisionChecker, star
         found = [scene.q_initial, scene.q_final]
         offset = fingertip_centre(robot, arm)
         for target, start in targets[arm]:
-            for s in range(starts + 1):
+            for s in range(starts + 2):
                 q0 = dec.q_hold.copy()
-                q0[idx] = start[idx] if s == 0 else rng.uniform(robot.lower[idx], robot.upper[idx])
+                q0[idx] = (start[idx] if s == 0 else scene.q_initial[idx] if s == 1 else
+                           np.clip(scene.q_initial[idx] + rng.normal(0.0, SPREAD, len(idx)), robot.lower[idx], robot.upper[idx]))
                 q = solve_position(robot, arm, target, q0, offset)
                 tip = robot.frame_placement(q, robot.palm_frame(arm))
                 if np.linalg.norm(tip[:3, :3] @ offset + tip[:3, 3] - target) <= TOLERANCE:
