@@ -145,6 +145,32 @@ def test_vertex_shortcuts_jump_to_the_farthest_reachable_vertex_and_check_each_k
     assert np.array_equal(shortcut_vertices(straight, rule, rule, min_gain=0.1), straight) and rule.calls == []
 
 
+def test_shortcuts_longer_than_the_limit_are_never_checked():
+    """A graph path keeps its edges rather than try a long new motion: with `max_length`, no motion checked by either
+    shortcut pass is longer than it (every motion valid here), the path's vertices stay where no short jump reaches,
+    and without it the greedy pass jumps straight from the first vertex to the last."""
+    from planner.motion.transit import shortcut_vertices
+
+    class Counting:
+        def __init__(self):
+            self.calls = []
+
+        def state_valid(self, q):
+            return True
+
+        def motion_valid(self, qa, qb, ends=True):
+            self.calls.append(float(np.linalg.norm(qb - qa)))
+            return True
+
+    zigzag = np.array([[0.0, 0.0], [0.6, 0.6], [1.2, 0.0], [1.8, 0.6], [2.4, 0.0], [3.0, 0.6]])
+    rule = Counting()
+    out = shortcut(shortcut_vertices(zigzag, rule, rule, 0.05, 1.0), rule, rule, np.random.default_rng(0), 50, 0.05, 1.0)
+    assert rule.calls and max(rule.calls) <= 1.0
+    assert np.linalg.norm(out[-1] - out[0]) > 1.0 and len(out) > 2
+    rule = Counting()
+    assert len(shortcut_vertices(zigzag, rule, rule, 0.05)) == 2 and max(rule.calls) > 3.0
+
+
 def _phase_planner(scene, roadmap, baseline: bool = False):
     """The planner of a double grasp on a scene and the roadmap, with the default parameters and seed 0."""
     from planner.collision.checker import build_collision_model

@@ -75,8 +75,9 @@ def _vis_prm_job(dec: Decomposition, arm: str, seed: int, params: RoadmapParams,
     rng = np.random.default_rng(seed)
     lower, upper = robot.lower[idx], robot.upper[idx]
     elem = vis_prm(seg, f"sub/{arm}", dec.q_hold, idx, lower, upper, rng, params.radius, params.nodes, params.max_failures)
-    elem = task_prm(seg, f"sub/{arm}", dec.q_hold, idx, lower, upper, elem, sites, rng, params.task_nodes, params.task_spread,
-                    params.task_edge, params.task_neighbours, params.radius, params.bridge_attempts)
+    if params.task_nodes:
+        elem = task_prm(seg, f"sub/{arm}", dec.q_hold, idx, lower, upper, elem, sites, rng, params.task_nodes, params.task_spread,
+                        params.task_edge, params.task_neighbours, params.radius, params.bridge_attempts)
     return elem, seg.checks - before
 
 
