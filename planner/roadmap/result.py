@@ -22,21 +22,16 @@ class RoadmapParams:
         0.015, 0.001, 0.2, "m", "robot-robot pairs count as colliding closer than this (and keep >= 0 between checks)")
     mixed_edges: bool = described(False, "also Super Graph edges whose common part switches source along two elementary edges")
     one_arm_edges: bool = described(True, "also Super Graph edges moving one arm along its elementary edge, the other still")
-    both_arm_edges: bool = described(False, "also Super Graph edges moving both arms along their elementary edges at once (the "
-                                     "paper's filter; they cost most of the build)")
-    other_arm_edges: bool = described(True, "also Super Graph edges moving the arm whose common part the nodes do not take, "
-                                      "the common part still (with one_arm_edges, each half is the product of the roadmaps)")
-    switch_length: float = bounded(0.5, 0.0, 100.0, "rad", "Super Graph edges switching the common part's source only where the "
-                                   "two common parts are this near")
+    both_arm_edges: bool = described(False, "also Super Graph edges moving both arms at once (the paper's; most of the build)")
+    other_arm_edges: bool = described(True, "also Super Graph edges moving the arm whose common part the nodes do not take")
+    switch_length: float = bounded(0.5, 0.0, 100.0, "rad", "Super Graph edges switching the common part's source: this near only")
     tree: bool = described(False, "the tree variant: Super Graph edges only between different connected components")
-    task_nodes: int = bounded(60, 0, 2000, "nodes", "nodes added per elementary roadmap around and between the task's sites (rest, "
-                              "placements, exchange)")
-    task_spread: float = bounded(0.25, 0.0, 3.0, "rad", "those nodes' Gaussian noise per joint around a site or a point between two")
-    task_edge: float = bounded(1.0, 0.01, 20.0, "rad", "those nodes' longest edge to a nearer node (a query end joins them as cheaply)")
-    task_neighbours: int = bounded(4, 1, 100, "edges", "edges joining each of those nodes to its nearest nodes")
+    task_nodes: int = bounded(60, 0, 2000, "nodes", "nodes added per elementary roadmap around the task's sites (0: Vis-PRM alone)")
+    task_spread: float = bounded(0.25, 0.0, 3.0, "rad", "their Gaussian noise per joint around a site or a point between two")
+    task_edge: float = bounded(1.0, 0.01, 20.0, "rad", "their longest edge to a nearer node (a query end joins them as cheaply)")
+    task_neighbours: int = bounded(4, 1, 100, "edges", "edges joining each of them to its nearest nodes")
     site_starts: int = bounded(4, 0, 100, "IK starts", "random IK starts per site target around the initial configuration")
-    bridge_attempts: int = bounded(200, 0, 10000, "edges", "nearest node pairs tried to join each smaller elementary component to "
-                                   "the rest (no longer than radius)")
+    bridge_attempts: int = bounded(200, 0, 10000, "edges", "nearest node pairs (within radius) tried to join a smaller component")
 
     def problem(self) -> str:
         """What is wrong between the values, naming the parameter ('' when nothing): checked before the step runs."""
