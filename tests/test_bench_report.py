@@ -36,3 +36,32 @@ def test_speedup_is_the_ratio_of_the_median_seconds_and_the_check_cost_is_report
     assert d["repeat"] == 1 and "fastest" not in text
     repeated = MotionBench([0, 1, 2], runs, (61.5, 70.25), repeat=3)
     assert repeated.to_dict()["repeat"] == 3 and "median 2.00 s over 3 seeds (the fastest of 3 runs each)" in repeated.render()
+
+
+def _timed(seed: int, transit: float, other: float, pairs: int) -> dict:
+    """A seed's record whose phases spend `transit` seconds in their transits (searching, validating, RRT, shortcutting)
+    and `other` in contact motions and timing, with `pairs` narrow-phase pair tests in each phase's transits."""
+    run = _run(seed, transit + other, 0)
+    per = len(PHASE_SECONDS)
+    seconds = [0.0] * (len(PHASES) * per) + [other / 2]
+    for i in range(len(PHASES)):
+        seconds[per * i: per * i + 4] = [transit / (4 * len(PHASES))] * 4
+        seconds[per * i + 4] = other / (2 * len(PHASES))
+    for phase in run["phases"]:
+        phase["transit_pair_tests"] = pairs
+    return {**run, "phase_seconds": seconds}
+
+
+def test_transit_speedup_is_the_median_of_per_seed_ratios_and_pair_tests_are_medians():
+    # per seed RRTConnect / ours: 2, 10, 3 -> median 3 (the ratio of the medians would be 5.0 / 1.0)
+    runs = {"roadmap": [_timed(0, 1.0, 0.5, 10), _timed(1, 0.5, 0.5, 30), _timed(2, 2.0, 0.5, 20)],
+            "rrt": [_timed(0, 2.0, 0.5, 50), _timed(1, 5.0, 0.5, 60), _timed(2, 6.0, 0.5, 100)]}
+    d = MotionBench([0, 1, 2], runs).to_dict()
+    assert abs(d["transit_speedup"] - 3.0) < 1e-9
+    assert abs(d["ours_transit_seconds_median"] - 1.0) < 1e-9 and abs(d["rrt_transit_seconds_median"] - 5.0) < 1e-9
+    assert d["ours_pair_tests_median"] == 4 * 20 and d["rrt_pair_tests_median"] == 4 * 60 and d["pair_test_ratio"] == 3.0
+    assert [row["ours_pair_tests"] for row in d["per_seed"]] == [40, 120, 80]
+    assert abs(d["per_seed"][1]["rrt_transit_seconds"] - 5.0) < 1e-9
+    text = MotionBench([0, 1, 2], runs).render()
+    assert "transit speedup (median over seeds of RRTConnect's transit seconds / ours): 3.00" in text
+    json.dumps(d)

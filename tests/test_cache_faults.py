@@ -35,7 +35,7 @@ def _grasps(scene: Scene) -> Any:
 def _roadmap(scene: Scene) -> Any:
     from planner.roadmap import RoadmapParams, roadmap_for
 
-    return roadmap_for(scene, RoadmapParams(nodes=3), 1)[0]
+    return roadmap_for(scene, RoadmapParams(nodes=3, task_nodes=0), 1)[0]
 
 
 def _pairs(scene: Scene) -> Any:

@@ -170,3 +170,32 @@ def test_pairs_the_robot_spec_allows_are_never_checked():
     assert not any(frozenset((links[i], links[j])) in allowed_links for i, j in pairs)
     elbow = links.index("left_upper_elbow_visual")
     assert any(elbow in pair for pair in pairs), "the cover is still checked against everything else"
+
+
+def test_pair_tests_count_the_pairs_that_reach_the_exact_test(default_scene, default_collision):
+    """A one-pair subset costs one exact test where its two geometries are in collision and none where they are a metre
+    apart (the broad phase drops it); a collision-free check of every pair tests at most every pair, and some."""
+    robot, cm = default_scene.robot, default_collision
+    checker = cm.checker()
+    objs = cm.geometry.geometryObjects
+    desk = next(e for e in range(cm.n_robot_geoms, len(objs)) if objs[e].name == "env/desk_top")
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q_rest)
+    pin.updateGeometryPlacements(robot.model, data, cm.geometry, gd := pin.GeometryData(cm.geometry), robot.q_rest)
+    desk_z = objs[desk].placement.translation[2]
+    pair = next(int(k) for k in cm.subsets["env"] if int(cm.ends[k][1]) == desk and cm.parts[int(cm.ends[k][0])] == "right"
+                and gd.oMg[int(cm.ends[k][0])].translation[2] > desk_z + 0.5)
+    geom = int(cm.ends[pair][0])
+    one = np.array([pair])
+    before = checker.pair_tests
+    assert not checker.in_collision(robot.q_rest, one)
+    assert checker.pair_tests == before, "a pair half a metre apart reached the exact test"
+    on_desk = {geom: objs[desk].placement.homogeneous}  # the link moved into the desk for this call
+    assert checker.in_collision(robot.q_rest, one, placed=on_desk)
+    assert checker.pair_tests == before + 1
+    rng = np.random.default_rng(3)
+    free = next(q for q in (robot.clip(robot.q_rest + rng.normal(0.0, 0.2, robot.nq)) for _ in range(200))
+                if not checker.in_collision(q))
+    before = checker.pair_tests
+    assert not checker.in_collision(free)
+    assert 0 < checker.pair_tests - before <= len(cm.subsets["all"])

@@ -13,6 +13,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from oracle import Oracle
 
@@ -142,6 +143,32 @@ def test_vertex_shortcuts_jump_to_the_farthest_reachable_vertex_and_check_each_k
     straight = np.array([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [3.0, 0.01]])
     rule = Rule()
     assert np.array_equal(shortcut_vertices(straight, rule, rule, min_gain=0.1), straight) and rule.calls == []
+
+
+def test_shortcuts_longer_than_the_limit_are_never_checked():
+    """A graph path keeps its edges rather than try a long new motion: with `max_length`, no motion checked by either
+    shortcut pass is longer than it (every motion valid here), the path's vertices stay where no short jump reaches,
+    and without it the greedy pass jumps straight from the first vertex to the last."""
+    from planner.motion.transit import shortcut_vertices
+
+    class Counting:
+        def __init__(self):
+            self.calls = []
+
+        def state_valid(self, q):
+            return True
+
+        def motion_valid(self, qa, qb, ends=True):
+            self.calls.append(float(np.linalg.norm(qb - qa)))
+            return True
+
+    zigzag = np.array([[0.0, 0.0], [0.6, 0.6], [1.2, 0.0], [1.8, 0.6], [2.4, 0.0], [3.0, 0.6]])
+    rule = Counting()
+    out = shortcut(shortcut_vertices(zigzag, rule, rule, 0.05, 1.0), rule, rule, np.random.default_rng(0), 50, 0.05, 1.0)
+    assert rule.calls and max(rule.calls) <= 1.0
+    assert np.linalg.norm(out[-1] - out[0]) > 1.0 and len(out) > 2
+    rule = Counting()
+    assert len(shortcut_vertices(zigzag, rule, rule, 0.05)) == 2 and max(rule.calls) > 3.0
 
 
 def _phase_planner(scene, roadmap, baseline: bool = False):
@@ -604,9 +631,10 @@ def test_clearances_measure_exactly_the_pairs_nearer_than_far():
 
 
 @pytest.mark.parametrize("baseline", [False, True], ids=["roadmap", "rrt"])
-def test_transit_checks_count_every_collision_check_of_the_transit(example, monkeypatch, baseline):
+def test_transit_checks_and_pair_tests_count_every_check_of_the_transit(example, monkeypatch, baseline):
     """Table I's transit checks are every collision check a transit makes, counted apart from the planner's own tally:
-    each call of the collision checker while the transit runs. The example's Rest transit, from where the placing hand
+    each call of the collision checker while the transit runs; its pair tests, pinocchio's count of the pairs each
+    check's broad phase passed to the exact test. The example's Rest transit, from where the placing hand
     retreated (near the object: some pairs checked densely) to the final configuration."""
     from planner.collision.checker import CollisionChecker
     from planner.collision.situation import Situation
@@ -623,11 +651,20 @@ def test_transit_checks_count_every_collision_check_of_the_transit(example, monk
     goal = scene.q_final.copy()
     goal[hands] = start[hands]
     planner = _phase_planner(scene, roadmap, baseline)
-    calls = []
+    calls, tested = [], []
     check = CollisionChecker.in_collision
     monkeypatch.setattr(CollisionChecker, "in_collision", lambda self, *a, **k: calls.append(1) or check(self, *a, **k))
+    collide = pin.computeCollisions
+
+    def counted(*args):  # pinocchio's own count of the pairs its callback sent to the exact test
+        hit = collide(*args)
+        tested.extend(a.count for a in args if isinstance(a, pin.CollisionCallBackDefault))
+        return hit
+
+    monkeypatch.setattr(pin, "computeCollisions", counted)
     planner.stage(Phase.REST).transit(start, goal, Situation(None, scene.object_final))
     assert planner.stats[Phase.REST].checks == len(calls) > 2, (planner.stats[Phase.REST].checks, len(calls))
+    assert planner.stats[Phase.REST].pair_tests == sum(tested) >= len(calls) / 2, (planner.stats[Phase.REST].pair_tests, sum(tested))
 
 
 def test_the_carry_transit_can_use_the_roadmap_nodes(example):

@@ -25,7 +25,7 @@ from planner.roadmap.build import build_roadmap, roadmap_collision_model, segmen
 from planner.roadmap.step import session_roadmap_seed
 from planner.roadmap.super_graph import components, edge_candidates, node_candidates
 
-SMALL = RoadmapParams(nodes=7, max_failures=100)
+SMALL = RoadmapParams(nodes=7, max_failures=100, task_nodes=0)  # Vis-PRM alone: the task sites have tests of their own
 SESSION_SEED = 3  # the seed of the session tests' plans (test_session.py)
 ORACLE_STEP = 0.01  # rad: the oracle's own resolution along an edge (largest joint change between two of its checks)
 
@@ -115,6 +115,22 @@ def test_one_arm_edges_move_the_arm_whose_common_part_the_nodes_take():
     expected |= {((still, a), (still, b), 1, 1, "cross/right") for a, b in e1 for still in (0, 1, 2)}
     assert found == expected
     assert len(cand) == len(both) + len(expected)
+
+
+def test_other_arm_edges_move_the_arm_whose_common_part_the_nodes_do_not_take():
+    """With `other_arm`, every (arm-1 edge, arm-0 node) pair in the half whose common part comes from arm 0 (and the
+    converse) is an edge too, checked for the moving arm against the rest; without `both`, no edge moves both arms."""
+    node_elem, source = node_candidates(3, 2)
+    e0, e1 = np.array([[0, 1], [1, 2]]), np.array([[0, 1]])
+    cand, subsets = edge_candidates(node_elem, source, e0, e1, ("right", "left"), mixed=False, one_arm=True, both=False,
+                                    other_arm=True)
+    found = {(tuple(node_elem[u]), tuple(node_elem[v]), int(source[u]), int(source[v]), s) for (u, v), s in zip(cand, subsets)}
+    one = {((a, still), (b, still), 0, 0, "cross/left") for a, b in e0 for still in (0, 1)}
+    one |= {((still, a), (still, b), 1, 1, "cross/right") for a, b in e1 for still in (0, 1, 2)}
+    other = {((a, still), (b, still), 1, 1, "cross/right") for a, b in e0 for still in (0, 1)}
+    other |= {((still, a), (still, b), 0, 0, "cross/left") for a, b in e1 for still in (0, 1, 2)}
+    switch = {((x0, x1), (x0, x1), 0, 1, "mixed") for x0 in range(3) for x1 in range(2)}
+    assert found == one | other | switch and len(cand) == len(found)
 
 
 def test_super_graph_moves_one_arm_at_a_time_too(small):
@@ -234,7 +250,7 @@ def test_roadmap_command_prints_the_table_and_writes_json(tmp_path, capsys, monk
     from workbench.cli import main
 
     out = tmp_path / "roadmap.json"
-    assert main(["roadmap", "--nodes", "4", "--seed", "2", "--json", str(out)]) == 0
+    assert main(["roadmap", "--nodes", "4", "--task-nodes", "0", "--seed", "2", "--json", str(out)]) == 0
     assert "collision checks" in capsys.readouterr().out
     data = json.loads(out.read_text())
     for key in ("nodes", "edges", "components", "collision_checks", "stage_seconds", "elementary_nodes", "resolution"):
@@ -242,19 +258,20 @@ def test_roadmap_command_prints_the_table_and_writes_json(tmp_path, capsys, monk
     assert set(data["elementary_nodes"]) == {"right", "left"} and not data["cached"]
     assert set(data["stage_seconds"]) == {"vis_prm", "sg_nodes", "sg_edges"}
     forbid(monkeypatch, "planner.roadmap.step.build_roadmap")
-    assert main(["roadmap", "--nodes", "4", "--seed", "2", "--json", str(out)]) == 0
+    assert main(["roadmap", "--nodes", "4", "--task-nodes", "0", "--seed", "2", "--json", str(out)]) == 0
     again = json.loads(out.read_text())
     assert again["cached"] and again["stage_seconds"] == {} and again["nodes"] == data["nodes"]
 
 
 @pytest.mark.slow
 def test_default_super_graph_size(default_scene, oracle):
-    """Two elementary roadmaps of 50 nodes give >= 1,700 Super Graph nodes; a sample of edges re-checked by the oracle.
-    The roadmap of the session tests' seed: built here or by them, then taken from the shared test cache (one build)."""
+    """Two elementary roadmaps of 30 Vis-PRM nodes and up to 60 around the task's sites give thousands of Super Graph
+    nodes, at least 97 % of them in one component; a sample of edges re-checked by the oracle. The roadmap of the
+    session tests' seed: built here or by them, then taken from the shared test cache (one build)."""
     roadmap = roadmap_for(default_scene, RoadmapParams(), session_roadmap_seed(SESSION_SEED))[0]
     stats = roadmap.stats()
-    assert stats["elementary_nodes"] == {"right": 50, "left": 50}
-    assert stats["nodes"] >= 1700
+    assert all(60 <= n <= 90 for n in stats["elementary_nodes"].values()), stats["elementary_nodes"]
+    assert stats["nodes"] >= 5000 and stats["largest_component"] >= 0.97 * stats["nodes"]
     rng = np.random.default_rng(0)
     for u, v in roadmap.edges[rng.choice(len(roadmap.edges), 40, replace=False)]:
         assert not _segment_collisions(oracle, roadmap.node_q[u], roadmap.node_q[v])

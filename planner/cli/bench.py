@@ -142,10 +142,14 @@ class MotionBench:
                 "speedup": rrt["seconds"] / ours["seconds"] if ours["seconds"] > 0 else None,
                 "ours_transit_checks_median": ours["transit_checks"], "rrt_transit_checks_median": rrt["transit_checks"],
                 "check_ratio": rrt["transit_checks"] / ours["transit_checks"] if ours["transit_checks"] > 0 else None,
+                "ours_transit_seconds_median": ours["transit_seconds"], "rrt_transit_seconds_median": rrt["transit_seconds"],
+                "transit_speedup": self.transit_speedup(),
+                "ours_pair_tests_median": ours["pair_tests"], "rrt_pair_tests_median": rrt["pair_tests"],
+                "pair_test_ratio": rrt["pair_tests"] / ours["pair_tests"] if ours["pair_tests"] > 0 else None,
                 "ours_success": ours["success"], "rrt_success": rrt["success"],
                 "ours_duration_median": ours["duration"], "rrt_duration_median": rrt["duration"],
                 "full_check_us_before": self.check_us[0], "full_check_us_after": self.check_us[1],
-                "phases": {"ours": ours["phases"], "rrt": rrt["phases"]}, "runs": self.runs}
+                "per_seed": self.per_seed(), "phases": {"ours": ours["phases"], "rrt": rrt["phases"]}, "runs": self.runs}
 
     def summary(self, planner: str) -> dict:
         """Medians over the seeds: total seconds, success fraction, and per phase Table I's figures."""
@@ -166,14 +170,32 @@ class MotionBench:
                            "edges_invalidated": _median([r["edges_invalidated"] for r in rows]),
                            "rrt_calls": _median([r["rrt_calls"] for r in rows]),
                            "transit_checks": _median([r["transit_checks"] for r in rows]),
+                           "pair_tests": _median([r.get("transit_pair_tests", 0) for r in rows]),
                            "smoothing_checks": _median([r.get("smoothing_checks", 0) for r in rows]),
                            "path_length": _median([r["path_length"] for r in rows]),
                            "straight_distance": _median([r.get("straight_distance", np.nan) for r in rows]),
                            "duration": _median([r["duration"] for r in rows])})
         return {"seconds": _median([r["seconds"] for r in runs]), "success": sum(r["success"] for r in runs) / len(runs),
+                "transit_seconds": _median([_transit_seconds(r) for r in runs if r["phase_seconds"]]),
+                "pair_tests": _median([_pair_tests(r) for r in runs if r["phases"]]),
                 "duration": _median([sum(p["duration"] for p in r["phases"]) for r in runs if r["success"]]),
                 "transit_checks": _median([sum(p["transit_checks"] for p in r["phases"]) for r in runs if r["phases"]]),
                 "phases": phases, "where": self.where(planner)}
+
+    def transit_speedup(self) -> float | None:
+        """The median over the seeds both planners ran of RRTConnect's transit seconds over ours (a ratio per seed: the
+        two ran back to back, so a busy minute slows both)."""
+        ratios = [_transit_seconds(b) / _transit_seconds(a) for a, b in zip(self.runs["roadmap"], self.runs["rrt"])
+                  if a["phase_seconds"] and b["phase_seconds"] and _transit_seconds(a) > 0]
+        return _median(ratios) if ratios else None
+
+    def per_seed(self) -> list[dict]:
+        """Per seed both planners ran: the step's seconds, its transits' seconds and their pair tests, for each."""
+        return [{"seed": a["seed"], "ours_seconds": a["seconds"], "rrt_seconds": b["seconds"],
+                 "ours_transit_seconds": _transit_seconds(a), "rrt_transit_seconds": _transit_seconds(b),
+                 "ours_pair_tests": _pair_tests(a), "rrt_pair_tests": _pair_tests(b),
+                 "ours_success": a["success"], "rrt_success": b["success"]}
+                for a, b in zip(self.runs["roadmap"], self.runs["rrt"])]
 
     def where(self, planner: str) -> dict:
         """Medians over the seeds of the seconds spent in each kind of work, summed over the phases of the motion found
@@ -201,22 +223,55 @@ class MotionBench:
             out += [f"{title}: median {s['seconds']:.2f} s over {len(self.seeds)} seeds{fastest}, success {s['success']:.0%}, "
                     f"{s['transit_checks']:.0f} transit collision checks, motion {s['duration']:.2f} s long",
                     f"{'phase':<7}{'nodes plan':>11}{'s plan':>8}{'nodes val':>10}{'s val':>8}{'invalid':>8}{'RRT':>5}"
-                    f"{'checks':>8}{'smooth':>8}{'s total':>9}{'success':>8}{'length':>8}{'straight':>9}{'duration':>9}"]
+                    f"{'checks':>8}{'pairs':>9}{'smooth':>8}{'s total':>9}{'success':>8}{'length':>8}{'straight':>9}{'duration':>9}"]
             for r in s["phases"]:
                 out.append(f"{r['phase']:<7}{r['nodes_planning']:>11.0f}{r['seconds_planning']:>8.2f}{r['nodes_validating']:>10.0f}"
                            f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['rrt_calls']:>5.0f}{r['transit_checks']:>8.0f}"
-                           f"{r['smoothing_checks']:>8.0f}{r['seconds']:>9.2f}{r['success']:>8.0%}{r['path_length']:>8.2f}"
+                           f"{r['pair_tests']:>9.0f}{r['smoothing_checks']:>8.0f}{r['seconds']:>9.2f}{r['success']:>8.0%}{r['path_length']:>8.2f}"
                            f"{r['straight_distance']:>9.2f}{r['duration']:>9.2f}")
             out.append("where the time goes (median s): " + ", ".join(f"{k} {v:.2f}" for k, v in s["where"].items())
                        + " (other: the wall time minus the rest; below 0 when the phases' transits ran in parallel)")
             out.append("")
+        out += [f"{'seed':<6}{'transit s ours':>15}{'RRTConnect':>11}{'ratio':>7}{'pair tests ours':>16}{'RRTConnect':>11}"
+                f"{'ratio':>7}{'step s ours':>12}{'RRTConnect':>11}"]
+        for row in self.per_seed():
+            out.append(f"{row['seed']:<6}{row['ours_transit_seconds']:>15.2f}{row['rrt_transit_seconds']:>11.2f}"
+                       f"{_ratio(row['rrt_transit_seconds'], row['ours_transit_seconds']):>7.2f}{row['ours_pair_tests']:>16}"
+                       f"{row['rrt_pair_tests']:>11}{_ratio(row['rrt_pair_tests'], row['ours_pair_tests']):>7.2f}"
+                       f"{row['ours_seconds']:>12.2f}{row['rrt_seconds']:>11.2f}")
+        out.append("")
         d = self.to_dict()
         out.append(f"speedup (RRTConnect median / ours): {d['speedup']:.2f}" if d["speedup"] else "speedup: n/a")
+        if d["transit_speedup"]:
+            out.append(f"transit speedup (median over seeds of RRTConnect's transit seconds / ours): {d['transit_speedup']:.2f}")
+        if d["pair_test_ratio"]:
+            out.append(f"transit pair tests (RRTConnect median / ours): {d['pair_test_ratio']:.2f} (a count: the same on any machine)")
         if d["check_ratio"]:
             out.append(f"transit collision checks (RRTConnect median / ours): {d['check_ratio']:.2f} (a count: the same on any machine)")
         out.append(f"a full collision check (regrasp bench collision) took {self.check_us[0]:.0f} µs before the runs and "
                    f"{self.check_us[1]:.0f} µs after: the seconds above scale with it, the counts do not")
         return "\n".join(out)
+
+
+TRANSIT_KINDS = 4  # of each phase's PHASE_SECONDS, the first are its transits' (searching, validating, RRT, shortcutting)
+
+
+def _transit_seconds(run: dict) -> float:
+    """A run's seconds in its transits, summed over the phases (their workers' seconds: the transits run in parallel)."""
+    from planner.motion import PHASE_SECONDS
+
+    per, sec = len(PHASE_SECONDS), run["phase_seconds"]
+    return float(sum(sum(sec[per * i: per * i + TRANSIT_KINDS]) for i in range(len(sec) // per)))
+
+
+def _pair_tests(run: dict) -> int:
+    """A run's narrow-phase pair tests in its transits, summed over the phases (0 for records from before they were
+    counted)."""
+    return int(sum(p.get("transit_pair_tests", 0) for p in run["phases"]))
+
+
+def _ratio(a: float, b: float) -> float:
+    return a / b if b > 0 else float("nan")
 
 
 def _median(values: list) -> float:

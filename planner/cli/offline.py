@@ -26,7 +26,8 @@ def _cmd_roadmap(args: argparse.Namespace) -> int:
     from planner.roadmap.result import render_stats
     from planner.roadmap.step import session_roadmap_seed
 
-    params = _option_params("--nodes", "roadmap", {"nodes": args.nodes, "tree": args.tree})
+    given = {"nodes": args.nodes, "task_nodes": args.task_nodes}
+    params = _option_params("--nodes", "roadmap", {"tree": args.tree, **{k: v for k, v in given.items() if v is not None}})
     scene = load_task(args.task)
     start = time.perf_counter()
     with Bars() as bars:
@@ -102,8 +103,11 @@ def add_roadmap(line: CommandLine) -> None:
     """`regrasp roadmap`."""
     rm = line.command("roadmap", "build (or load from the cache) the offline roadmap and print its statistics", _cmd_roadmap)
     add_task(rm)
-    rm.add("--nodes", type=int, default=50, help="nodes per elementary roadmap (roadmap.nodes: `regrasp params` gives its range)")
+    rm.add("--nodes", type=int, help="Vis-PRM nodes per elementary roadmap (roadmap.nodes: `regrasp params` gives its range "
+           "and default)")
     rm.add("--seed", type=seed_argument, default=0, help="session seed (the same roadmap as a session with this seed)")
+    rm.add("--task-nodes", type=int, help="nodes added per elementary roadmap around the task's sites (roadmap.task_nodes; "
+           "0: Vis-PRM alone)")
     rm.add("--tree", action="store_true", help="the tree variant: SG edges only between different components")
     rm.add("--no-cache", action="store_true", help="rebuild even when a cached roadmap exists")
     add_json(rm, "the statistics")

@@ -209,6 +209,7 @@ class CollisionChecker:
         self._own_margins: np.ndarray | None = None
         self._last: tuple | None = None  # (subset, margins, screen) of the last check, while its setting is active
         self.checks = 0
+        self.pair_tests = 0  # pairs that reached the exact (narrow-phase) test: past the broad phase, active in the subset
 
     def _entry(self, subset: str | np.ndarray) -> tuple[np.ndarray, Screen | None, np.ndarray]:
         """(pair indices, screen, pair table) of a subset, made once."""
@@ -268,13 +269,13 @@ class CollisionChecker:
             for index, T in placed.items():
                 gd.oMg[index] = se3(T)
             manager.update(False)
-        if screen is None:
-            return bool(pin.computeCollisions(manager, True) if placed else
-                        pin.computeCollisions(self.model, self.data, manager, q, True))
         first = self._first
         hit = bool(pin.computeCollisions(manager, first) if placed else
                    pin.computeCollisions(self.model, self.data, manager, first, q))
-        return hit and self._past_screens(gd, manager, screen)
+        self.pair_tests += first.count
+        if not hit or screen is None:
+            return hit
+        return self._past_screens(gd, manager, screen)
 
     def _past_screens(self, gd: pin.GeometryData, manager, screen: Screen) -> bool:
         """After a hit: whether the subset's own pairs collide. A screening pair hit (the object's hull, which holds its
@@ -284,11 +285,14 @@ class CollisionChecker:
         try:
             while screen.screening[first.collisionPairIndex]:
                 k = first.collisionPairIndex
+                self.pair_tests += 1
                 if pin.computeCollision(self.cm.geometry, gd, int(self.cm.twins[k])):
                     return True
                 gd.deactivateCollisionPair(k)
                 off.append(k)
-                if not pin.computeCollisions(manager, first):
+                hit = pin.computeCollisions(manager, first)
+                self.pair_tests += first.count
+                if not hit:
                     return False
             return True
         finally:

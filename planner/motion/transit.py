@@ -41,6 +41,7 @@ class TransitParams:
     rrt_step: float
     shortcut_attempts: int
     shortcut_min_gain: float
+    graph_shortcut_length: float
     goal_nodes: int
 
     @classmethod
@@ -64,6 +65,7 @@ class TransitStats:
     rrt_calls: int = 0
     searches: int = 0
     checks: int = 0  # collision checks of the transits (their ends, connecting, validating, reconnecting, shortcutting)
+    pair_tests: int = 0  # of those checks' pairs, how many reached the exact test (a count of narrow-phase work)
 
 
 class TransitFailed(Exception):
@@ -251,12 +253,15 @@ def rrt_transit(space: JointSpace, full: MotionValidity, near: MotionValidity, q
     return found
 
 
-def shortcut_vertices(path: np.ndarray, full: MotionValidity, near: MotionValidity, min_gain: float = 0.0) -> np.ndarray:
+def shortcut_vertices(path: np.ndarray, full: MotionValidity, near: MotionValidity, min_gain: float = 0.0,
+                      max_length: float = np.inf) -> np.ndarray:
     """Greedy shortcuts between vertices: from the first vertex, a straight motion to the farthest later vertex it can
     reach validly (checked with `near` from the first or to the last vertex: close to the ends), then on from there. Each
     motion kept is checked once (random shortcuts check many that a later one replaces) and the path keeps few vertices,
     each a stop of the rest-to-rest timing. A jump that would shorten the path by less than `min_gain` is taken along the
-    path itself, unchecked (the gain only grows with the vertex jumped to: no nearer one gains more)."""
+    path itself, unchecked (the gain only grows with the vertex jumped to: no nearer one gains more); one longer than
+    `max_length` is not tried (a path of roadmap edges, checked offline, keeps them rather than pay every pair's checks
+    along a long new motion)."""
     path = np.asarray(path, dtype=float)
     n = len(path)
     cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
@@ -264,10 +269,11 @@ def shortcut_vertices(path: np.ndarray, full: MotionValidity, near: MotionValidi
     while i < n - 1:
         j = n - 1
         while j > i + 1:
-            if cum[j] - cum[i] - float(np.linalg.norm(path[j] - path[i])) < min_gain:
+            straight = float(np.linalg.norm(path[j] - path[i]))
+            if cum[j] - cum[i] - straight < min_gain:
                 out.extend(path[i + 1: j])  # nearly straight already
                 break
-            if (near if i == 0 or j == n - 1 else full).motion_valid(path[i], path[j]):
+            if straight <= max_length and (near if i == 0 or j == n - 1 else full).motion_valid(path[i], path[j]):
                 break
             j -= 1
         out.append(path[j])
@@ -276,13 +282,13 @@ def shortcut_vertices(path: np.ndarray, full: MotionValidity, near: MotionValidi
 
 
 def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: np.random.Generator, attempts: int,
-             min_gain: float = 0.0) -> np.ndarray:
+             min_gain: float = 0.0, max_length: float = np.inf) -> np.ndarray:
     """Random shortcuts between two points of the polyline (by arc length), kept when the two points and the straight
     motion between them are valid (checked with `near` when it leaves the first segment or reaches the last: close to
     the ends). The points are checked too: one inside a checked segment keeps the clearance, not the padding that a
     motion check needs at both ends for its guarantee. A shortcut that would shorten the path by less than `min_gain`
     (joint-space length) is not checked: a valid one costs every check of its segment, and once the path is nearly
-    straight most would gain nothing."""
+    straight most would gain nothing. One longer than `max_length` is not checked either (see shortcut_vertices)."""
     path = np.array(path, dtype=float)
     for _ in range(attempts):
         if len(path) < 3:
@@ -295,7 +301,7 @@ def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: 
             continue
         a = path[i] + (s1 - cum[i]) / max(seg[i], 1e-12) * (path[i + 1] - path[i])
         b = path[j] + (s2 - cum[j]) / max(seg[j], 1e-12) * (path[j + 1] - path[j])
-        if s2 - s1 - float(np.linalg.norm(b - a)) < min_gain:
+        if s2 - s1 - float(np.linalg.norm(b - a)) < min_gain or float(np.linalg.norm(b - a)) > max_length:
             continue
         if (near if i == 0 or j == len(seg) - 1 else full).motion_valid(a, b):
             path = np.concatenate([path[: i + 1], [a, b], path[j + 1:]])

@@ -51,11 +51,13 @@ class TransitStage:
         part = TRANSIT_PARTS[0] if arm is None else TRANSIT_PARTS[1]
         full, near = self.validities.of(situation, q_start, idx).transit_validities(q_start, q_goal)
         checkers = [full.seg] if near.seg is full.seg else [full.seg, near.seg]  # one when no pair is fitted
-        before = sum(c.checks for c in checkers)
+        scratch = list({id(c.checker): c.checker for c in checkers}.values())  # the situation's, shared by both
+        before = sum(c.checks for c in checkers), sum(c.pair_tests for c in scratch)
         try:
             return self._transit(part, q_start, q_goal, situation, space, full, near, arm)
         finally:
-            self.stats.checks += sum(c.checks for c in checkers) - before
+            self.stats.checks += sum(c.checks for c in checkers) - before[0]
+            self.stats.pair_tests += sum(c.pair_tests for c in scratch) - before[1]
 
     def _transit(self, part: str, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, space: JointSpace,
                  full: Validity, near: Validity, arm: str | None) -> Piece:
@@ -81,7 +83,8 @@ class TransitStage:
             raise PieceFailed(phase, part, str(exc)) from exc
         t = time.perf_counter()
         gain = tp.shortcut_min_gain
-        path = shortcut(shortcut_vertices(path, full, near, gain), full, near, self.rng, tp.shortcut_attempts, gain)
+        longest = np.inf if self.baseline or arm is not None else tp.graph_shortcut_length  # a graph path: see shortcut_vertices
+        path = shortcut(shortcut_vertices(path, full, near, gain, longest), full, near, self.rng, tp.shortcut_attempts, gain, longest)
         stats.seconds_shortcut += time.perf_counter() - t
         return Piece(phase, part, path, situation)
 

@@ -22,6 +22,8 @@ from planner.model.task import Scene
 from planner.roadmap import super_graph as sg
 from planner.roadmap.decomposition import Decomposition, decompose, pair_subsets
 from planner.roadmap.result import Roadmap, RoadmapParams
+from planner.roadmap.task_prm import task_prm
+from planner.roadmap.task_sites import task_sites
 from planner.roadmap.vis_prm import Elementary, vis_prm
 
 _WORKER: dict = {}
@@ -64,13 +66,18 @@ def _segments_job(qa: np.ndarray, qb: np.ndarray, subsets: list[str]) -> tuple[n
     return ok, seg.checks - before
 
 
-def _vis_prm_job(dec: Decomposition, arm: str, seed: int, params: RoadmapParams) -> tuple[Elementary, int]:
+def _vis_prm_job(dec: Decomposition, arm: str, seed: int, params: RoadmapParams, sites: np.ndarray) -> tuple[Elementary, int]:
+    """One arm's elementary roadmap: Vis-PRM, then the nodes around and between the task's sites (task_prm.py)."""
     seg: SegmentChecker = _WORKER["seg"]
     before = seg.checks
     robot = seg.cm.robot
     idx = dec.subsystem(arm)
-    elem = vis_prm(seg, f"sub/{arm}", dec.q_hold, idx, robot.lower[idx], robot.upper[idx], np.random.default_rng(seed),
-                   params.radius, params.nodes, params.max_failures)
+    rng = np.random.default_rng(seed)
+    lower, upper = robot.lower[idx], robot.upper[idx]
+    elem = vis_prm(seg, f"sub/{arm}", dec.q_hold, idx, lower, upper, rng, params.radius, params.nodes, params.max_failures)
+    if params.task_nodes:
+        elem = task_prm(seg, f"sub/{arm}", dec.q_hold, idx, lower, upper, elem, sites, rng, params.task_nodes, params.task_spread,
+                        params.task_edge, params.task_neighbours, params.radius, params.bridge_attempts)
     return elem, seg.checks - before
 
 
@@ -94,13 +101,20 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
     """(both elementary roadmaps and their Super Graph (deterministic in `seed`), the seconds of each stage)."""
     cm, dec = roadmap_collision_model(scene, params)
     arms = dec.arms
-    seeds = np.random.SeedSequence(seed).generate_state(len(arms), dtype=np.uint64)
+    seeds = np.random.SeedSequence(seed).generate_state(len(arms) + 1, dtype=np.uint64)
     timings, checks = {}, {}
+    sites = {arm: np.zeros((0, len(dec.subsystem(arm)))) for arm in arms}
+    if params.task_nodes:
+        t = time.perf_counter()
+        progress(0.0, "the task's sites (IK)")
+        sites = task_sites(scene, dec, build_collision_model(scene.robot, scene.environment).checker(), params.site_starts,
+                           np.random.default_rng(int(seeds[-1])))
+        timings["sites"], checks["sites"] = time.perf_counter() - t, 0
     workers = available_cpus()
     with executor(workers, _init_worker, (cm, params)) as pool:
         t = time.perf_counter()
-        progress(0.0, "elementary roadmaps (Vis-PRM)")
-        jobs = [pool.submit(_vis_prm_job, dec, arm, int(s), params) for arm, s in zip(arms, seeds)]
+        progress(0.05, "elementary roadmaps (Vis-PRM, then the task's sites)")
+        jobs = [pool.submit(_vis_prm_job, dec, arm, int(s), params, sites[arm]) for arm, s in zip(arms, seeds)]
         elems = [j.result() for j in jobs]
         timings["vis_prm"] = time.perf_counter() - t
         checks["vis_prm"] = sum(c for _, c in elems)
@@ -120,7 +134,12 @@ def build_roadmap(scene: Scene, params: RoadmapParams, seed: int, progress: Prog
 
         t = time.perf_counter()
         cand, subsets = sg.edge_candidates(node_elem, node_common, e0.edges, e1.edges, arms, params.mixed_edges,
-                                         params.one_arm_edges)
+                                         params.one_arm_edges, params.both_arm_edges, params.other_arm_edges)
+        switch = np.all(node_elem[cand[:, 0]] == node_elem[cand[:, 1]], axis=1)
+        common = dec.common
+        near = np.linalg.norm(node_q[cand[:, 0]][:, common] - node_q[cand[:, 1]][:, common], axis=1) <= params.switch_length
+        kept = ~switch | near
+        cand, subsets = cand[kept], [sub for sub, k in zip(subsets, kept) if k]
         if params.tree:
             seg = segment_checker(cm, params)
             uf = sg.UnionFind(len(node_q))

@@ -13,7 +13,7 @@ from planner.core.results import array
 class RoadmapParams:
     """How the offline roadmap is built (all part of its cache key)."""
 
-    nodes: int = bounded(50, 2, 500, "nodes", "nodes per elementary roadmap (Vis-PRM stops there)")
+    nodes: int = bounded(30, 2, 500, "nodes", "nodes per elementary roadmap of Vis-PRM (it stops there; task nodes are added)")
     radius: float = bounded(3.0, 0.01, 20.0, "rad", "a guard's visibility range (joint-space distance over a sub-system's joints)")
     max_failures: int = bounded(300, 1, 100000, "samples", "Vis-PRM also stops after this many useless samples in a row")
     env_padding: float = bounded(0.03, 0.001, 0.2, "m", "robot-obstacle pairs count as colliding closer than this at checks")
@@ -22,7 +22,16 @@ class RoadmapParams:
         0.015, 0.001, 0.2, "m", "robot-robot pairs count as colliding closer than this (and keep >= 0 between checks)")
     mixed_edges: bool = described(False, "also Super Graph edges whose common part switches source along two elementary edges")
     one_arm_edges: bool = described(True, "also Super Graph edges moving one arm along its elementary edge, the other still")
+    both_arm_edges: bool = described(False, "also Super Graph edges moving both arms at once (the paper's; most of the build)")
+    other_arm_edges: bool = described(True, "also Super Graph edges moving the arm whose common part the nodes do not take")
+    switch_length: float = bounded(0.5, 0.0, 100.0, "rad", "Super Graph edges switching the common part's source: this near only")
     tree: bool = described(False, "the tree variant: Super Graph edges only between different connected components")
+    task_nodes: int = bounded(60, 0, 2000, "nodes", "nodes added per elementary roadmap around the task's sites (0: Vis-PRM alone)")
+    task_spread: float = bounded(0.25, 0.0, 3.0, "rad", "their Gaussian noise per joint around a site or a point between two")
+    task_edge: float = bounded(1.0, 0.01, 20.0, "rad", "their longest edge to a nearer node (a query end joins them as cheaply)")
+    task_neighbours: int = bounded(4, 1, 100, "edges", "edges joining each of them to its nearest nodes")
+    site_starts: int = bounded(4, 0, 100, "IK starts", "random IK starts per site target around the initial configuration")
+    bridge_attempts: int = bounded(200, 0, 10000, "edges", "nearest node pairs (within radius) tried to join a smaller component")
 
     def problem(self) -> str:
         """What is wrong between the values, naming the parameter ('' when nothing): checked before the step runs."""

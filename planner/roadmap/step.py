@@ -14,13 +14,17 @@ from planner.model.task import Scene
 from planner.roadmap.build import build_roadmap
 from planner.roadmap.result import Roadmap, RoadmapParams
 
-CODE_VERSION = "roadmap-2"  # 2: no timings in the roadmap
+CODE_VERSION = "roadmap-3"  # 2: no timings in the roadmap; 3: nodes around the task's sites
 
 
 def cache_key(scene: Scene, params: RoadmapParams, seed: int) -> str:
-    """A hash of the robot spec and its URDFs, the obstacles, the parameters, the seed and the code version."""
+    """A hash of the robot spec and its URDFs, the obstacles, the parameters, the seed and the code version; with task
+    nodes, also the task's sites' inputs (its start and end configurations, the object and its placements)."""
     robot = scene.robot
     parts: list[str | bytes] = [CODE_VERSION, PAIRS_VERSION, robot.spec.text(), repr((params, seed))]
+    if params.task_nodes:
+        parts += [a.tobytes() for a in (scene.q_initial, scene.q_final, scene.object_initial, scene.object_final,
+                                         scene.object_mesh.vertices, scene.object_mesh.faces)]
     parts += [Path(p).read_bytes() for p in [robot.spec.body_urdf] + [a.hand.urdf for a in robot.spec.arms]]
     for ob in scene.environment:
         parts += [repr((ob.name, ob.shape, ob.size)), ob.pose.tobytes()]

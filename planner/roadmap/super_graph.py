@@ -10,7 +10,9 @@ paper's filter allows it, but it doubles the edge stage), the common part moves 
 elementary edge and every moving pair not inside one arm ('mixed') is checked (intra-arm pairs
 depend on that arm's joints only, which follow their elementary edge). The two nodes of one
 elementary pair are joined by a 'switch' edge (arms still, the common part moves; 'mixed' again),
-which links the halves of the graph with either source at a fraction of the cost.
+which links the halves of the graph with either source at a fraction of the cost. Edges moving one arm at a time
+make each half the product of the elementary roadmaps (its components theirs) at a small part of the cost of
+moving both arms at once, whose edge count is the product of the elementary edge counts.
 """
 from __future__ import annotations
 
@@ -32,35 +34,42 @@ def node_subsets(source: np.ndarray, arms: tuple[str, str]) -> list[str]:
 
 
 def edge_candidates(node_elem: np.ndarray, node_source: np.ndarray, edges0: np.ndarray, edges1: np.ndarray,
-                    arms: tuple[str, str], mixed: bool, one_arm: bool = False) -> tuple[np.ndarray, list[str]]:
+                    arms: tuple[str, str], mixed: bool, one_arm: bool = False, both: bool = True,
+                    other_arm: bool = False) -> tuple[np.ndarray, list[str]]:
     """(c, 2) SG node pairs to test, in a deterministic order, and the pair subset checking each.
 
-    Edges along an elementary edge in both roadmaps with the same common-part source; with `mixed`,
-    also those whose source switches; with `one_arm`, those along an elementary edge of the arm whose
-    common part the nodes take, the other arm still; and 'switch' edges between the two nodes of one
-    elementary pair (only the common part moves, from one source to the other).
+    With `both`, edges along an elementary edge in both roadmaps with the same common-part source (with `mixed`, also
+    those whose source switches); with `one_arm`, those along an elementary edge of the arm whose common part the nodes
+    take, the other arm still; with `other_arm`, those along an elementary edge of the other arm, the common part and
+    the first arm still (that arm against everything else is what changed: its own pairs moved as in its roadmap); and
+    'switch' edges between the two nodes of one elementary pair (only the common part moves, from one source to the
+    other).
     """
     index = {(int(a), int(b), int(s)): k for k, (a, b, s) in enumerate(zip(node_elem[:, 0], node_elem[:, 1], node_source))}
     out, subsets = [], []
-    for a, b in edges0:
-        for c, d in edges1:
-            for (x0, x1), (y0, y1) in (((a, c), (b, d)), ((a, d), (b, c))):
-                for s, t in ((0, 0), (1, 1), (0, 1), (1, 0)) if mixed else ((0, 0), (1, 1)):
-                    u, v = index.get((x0, x1, s)), index.get((y0, y1, t))
-                    if u is not None and v is not None:
-                        out.append((u, v))
-                        subsets.append(f"cross/{arms[1 - s]}" if s == t else "mixed")
-    if one_arm:
-        for s, elementary in ((0, edges0), (1, edges1)):
-            def key(moving: int, still: int, s: int = s) -> tuple[int, int, int]:
-                return (moving, still, s) if s == 0 else (still, moving, s)
+    if both:
+        for a, b in edges0:
+            for c, d in edges1:
+                for (x0, x1), (y0, y1) in (((a, c), (b, d)), ((a, d), (b, c))):
+                    for s, t in ((0, 0), (1, 1), (0, 1), (1, 0)) if mixed else ((0, 0), (1, 1)):
+                        u, v = index.get((x0, x1, s)), index.get((y0, y1, t))
+                        if u is not None and v is not None:
+                            out.append((u, v))
+                            subsets.append(f"cross/{arms[1 - s]}" if s == t else "mixed")
+    for s in (0, 1):  # the half of the graph whose nodes take the common part from arm s
+        for m, elementary in ((0, edges0), (1, edges1)):  # the arm that moves
+            if not (one_arm if m == s else other_arm):
+                continue
+
+            def key(moving: int, still: int, m: int = m, s: int = s) -> tuple[int, int, int]:
+                return (moving, still, s) if m == 0 else (still, moving, s)
 
             for a, b in elementary:
-                for still in np.unique(node_elem[:, 1 - s]).tolist():
+                for still in np.unique(node_elem[:, 1 - m]).tolist():
                     u, v = index.get(key(a, still)), index.get(key(b, still))
                     if u is not None and v is not None:
                         out.append((u, v))
-                        subsets.append(f"cross/{arms[1 - s]}")
+                        subsets.append(f"cross/{arms[1 - m]}" if m == s else f"cross/{arms[m]}")
     for (x0, x1, s), u in index.items():
         v = index.get((x0, x1, 1))
         if s == 0 and v is not None:

@@ -48,7 +48,7 @@ def vis_prm(seg: SegmentChecker, subset: str, base: np.ndarray, idx: np.ndarray,
             for k in np.argsort(dist):
                 if dist[k] > radius:
                     break
-                if seg.segment_free(q, _full(base, idx, nodes[comp[k]]), subset, ends=False):
+                if seg.segment_free(q, full_config(base, idx, nodes[comp[k]]), subset, ends=False):
                     seen.append((c, comp[k]))
                     break
         if len(seen) == 1:
@@ -69,7 +69,8 @@ def vis_prm(seg: SegmentChecker, subset: str, base: np.ndarray, idx: np.ndarray,
                       np.array(guard, dtype=bool), samples)
 
 
-def _full(base: np.ndarray, idx: np.ndarray, values: np.ndarray) -> np.ndarray:
+def full_config(base: np.ndarray, idx: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """`base` with the joints `idx` at `values`."""
     q = base.copy()
     q[idx] = values
     return q
