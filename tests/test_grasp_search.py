@@ -109,11 +109,11 @@ def test_ik_groups_stop_as_if_solved_alone(default_scene):
     targets = finger.tip_positions(rng.uniform(lower, upper, (40, finger.dof)))
     q0 = rng.uniform(lower, upper, (40, finger.dof))
     groups = rng.integers(0, 5, 40)
-    q, err = finger.ik(targets, q0, lower, upper, 2e-4, 4, groups=groups)
+    q, err, J = finger.ik(targets, q0, lower, upper, 2e-4, 4, groups=groups)
     for g in range(5):
         rows = groups == g
-        q_alone, err_alone = finger.ik(targets[rows], q0[rows], lower, upper, 2e-4, 4)
-        assert np.array_equal(q[rows], q_alone) and np.array_equal(err[rows], err_alone)
+        q_alone, err_alone, J_alone = finger.ik(targets[rows], q0[rows], lower, upper, 2e-4, 4)
+        assert np.array_equal(q[rows], q_alone) and np.array_equal(err[rows], err_alone) and np.array_equal(J[rows], J_alone)
 
 
 def test_candidates_are_the_targets_in_the_finger_spheres_in_kd_tree_order(search_and_frames):

@@ -122,10 +122,10 @@ class GraspSearch:
                     return None
         return [(shape.geometry, tf, centre, float(r)) for shape, tf, centre, r in zip(shapes, transforms, centres, radii)]
 
-    def _presses(self, fi: int, q: np.ndarray, normals: np.ndarray) -> np.ndarray:
-        """Which contacts the finger can press: closing it (joints moving from the open configuration towards
-        mid-range) moves the fingertip into the surface, within `press_angle` of the inward normal."""
-        _, J = self.hand.fingers[fi].jacobians(q)
+    def _presses(self, fi: int, J: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Which contacts the finger can press, by its fingertip Jacobians J (m, 3, k): closing it (joints moving from
+        the open configuration towards mid-range) moves the fingertip into the surface, within `press_angle` of the
+        inward normal."""
         motion = J @ self.closing[fi]
         norm = np.linalg.norm(motion, axis=1)
         return -np.einsum("ij,ij->i", motion, normals) > np.cos(self.p.press_angle) * np.maximum(norm, 1e-12)
@@ -153,10 +153,10 @@ class GraspSearch:
             R = H[frame, :3, :3]
             targets = np.einsum("ki,kij->kj", self.targets[fi][point] - H[frame, :3, 3], R)
             _, seed = self.seeds[fi].query(targets)
-            q, err = finger.ik(targets, self.workspaces[fi].seed_q[seed], lower, upper, p.ik_tolerance, p.ik_iterations,
-                               groups=frame)
+            q, err, J = finger.ik(targets, self.workspaces[fi].seed_q[seed], lower, upper, p.ik_tolerance,
+                                  p.ik_iterations, groups=frame)
             ok = np.flatnonzero(err < p.ik_tolerance)
-            ok = ok[self._presses(fi, q[ok], np.einsum("ki,kij->kj", self.obj.normals[point[ok]], R[ok]))]
+            ok = ok[self._presses(fi, J[ok], np.einsum("ki,kij->kj", self.obj.normals[point[ok]], R[ok]))]
             if len(ok) == 0:
                 continue
             world = H[frame[ok], None] @ finger.shape_poses(q[ok])
