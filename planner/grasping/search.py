@@ -11,7 +11,8 @@ sample; a solution counts when closing the finger pushes its tip into the surfac
 `press_angle` of the inward normal: a finger can only squeeze by closing). A frame takes its first
 candidate, in rank order, whose finger is collision-free with the object (the fingertip sphere
 shrunk by a clearance, since it touches) and with the fingers already placed: certain hits are
-screened out for all candidates at once (planner/collision/object_screens.py), coal's exact test decides the rest. A finger
+screened out for all candidates at once, and so are shapes certainly clear of the object
+(planner/collision/object_screens.py); coal's exact test decides the rest. A finger
 without contact stays open and must be collision-free too. Grasps of >= 3 contacts go to the
 stability filter, where a separating hyperplane rules most out before the exact hull.
 """
@@ -79,7 +80,7 @@ class GraspSearch:
         self.hand, self.workspaces, self.obj, self.p = hand, workspaces, obj, p
         self.test = ObjectTest(mesh)
         self.triangles = np.asarray(mesh.triangles, float)
-        self.screen = ObjectScreen(obj.tree)
+        self.screen = ObjectScreen(obj.tree, self.triangles, obj.step)
         self.seeds = [w.seeds() for w in workspaces]
         self.limits = [f.reduced_limits(limit_margin) for f in hand.fingers]
         self.torque_scale = obj.radius
@@ -97,30 +98,43 @@ class GraspSearch:
         spheres = [[bounding(s.geometry, np.eye(4)) for s in f.shapes] for f in hand.fingers]
         self.test_order = [sorted(range(len(f.shapes)), key=lambda j, f=f: (f.shapes[j].is_tip, -f.shapes[j].link)) for f in hand.fingers]
         self.bounds = [(np.array([c for c, _ in b]).reshape(-1, 3), np.array([r for _, r in b])) for b in spheres]
+        # per finger and touching or open, the radii screened for clearance (a touching fingertip never is: inf)
+        self.screened = [{touching: np.where([touching and s.is_tip for s in f.shapes], np.inf, radii)
+                          for touching in (True, False)} for f, (_, radii) in zip(hand.fingers, self.bounds)]
 
     def _probe(self, fi: int, shape, touching: bool) -> Geometry:
         """What a finger shape is tested against the object as: a touching fingertip shrunk by the clearance."""
         return self.tip_spheres[fi] if (touching and shape.is_tip) else shape.geometry
 
-    def _fits(self, fi: int, world: np.ndarray, placed: list[Posed], touching: bool) -> list[Posed] | None:
-        """The finger's shapes (posed in the object frame, `world` (s, 4, 4)) when collision-free with the object and the
-        placed shapes, else None. Coal tests the object first, links nearest the fingertip first (the likeliest to
-        touch it), then the placed shapes whose bounding spheres reach the finger's."""
+    def _centres(self, fi: int, world: np.ndarray) -> np.ndarray:
+        """(m, s, 3) the bounding-sphere centres of a finger's shapes posed at `world` (m, s, 4, 4)."""
+        return np.einsum("msij,sj->msi", world[..., :3, :3], self.bounds[fi][0]) + world[..., :3, 3]
+
+    def _fits(self, fi: int, world: np.ndarray, centres: np.ndarray, clear: np.ndarray, placed: list[Posed],
+              touching: bool) -> list[Posed] | None:
+        """The finger's shapes (posed in the object frame, `world` (s, 4, 4), bounding spheres at `centres` (s, 3)) when
+        collision-free with the object and the placed shapes, else None. Coal tests the object for the shapes the
+        screen does not show `clear` of it, links nearest the fingertip first (the likeliest to touch it), then the
+        placed shapes whose bounding spheres reach the finger's."""
         shapes, test = self.hand.fingers[fi].shapes, self.test
         transforms: list = [None] * len(shapes)
         for j in self.test_order[fi]:
+            if clear[j]:
+                continue
             transforms[j] = transform3s(world[j])
             if test.hits_object(self._probe(fi, shapes[j], touching), transforms[j]):
                 return None
-        centres = np.einsum("sij,sj->si", world[:, :3, :3], self.bounds[fi][0]) + world[:, :3, 3]
         radii = self.bounds[fi][1]
         if placed:
-            others, other_radii = np.array([o[2] for o in placed]), np.array([o[3] for o in placed])
+            others, other_radii = np.array([o.centre for o in placed]), np.array([o.radius for o in placed])
             near = np.linalg.norm(centres[:, None] - others[None], axis=2) <= radii[:, None] + other_radii + SPHERE_MARGIN
             for j, o in zip(*np.nonzero(near)):
-                if test.hits_placed((shapes[j].geometry, transforms[j]), [placed[o][:2]]):
+                if transforms[j] is None:
+                    transforms[j] = transform3s(world[j])
+                if test.hits_placed((shapes[j].geometry, transforms[j]), [(placed[o].geometry, placed[o].transform())]):
                     return None
-        return [(shape.geometry, tf, centre, float(r)) for shape, tf, centre, r in zip(shapes, transforms, centres, radii)]
+        return [Posed(shape.geometry, pose, centre, float(r), tf)
+                for shape, pose, centre, r, tf in zip(shapes, world, centres, radii, transforms)]
 
     def _presses(self, fi: int, J: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Which contacts the finger can press, by its fingertip Jacobians J (m, 3, k): closing it (joints moving from
@@ -160,12 +174,14 @@ class GraspSearch:
             if len(ok) == 0:
                 continue
             world = H[frame[ok], None] @ finger.shape_poses(q[ok])
-            sure = self.screen.hits(world, self.inside[fi][True])
-            for j in np.flatnonzero(~sure):
+            tried = np.flatnonzero(~self.screen.hits(world, self.inside[fi][True]))
+            centres = self._centres(fi, world[tried])
+            clear = self.screen.clear(centres, self.screened[fi][True])
+            for j, centre, free in zip(tried, centres, clear):
                 k = ok[j]
                 if done[frame[k]]:
                     continue
-                posed = self._fits(fi, world[j], placed[frame[k]], touching=True)
+                posed = self._fits(fi, world[j], centre, free, placed[frame[k]], touching=True)
                 if posed is not None:
                     found[int(frame[k])] = (q[k], int(point[k]), posed)
                     done[frame[k]] = True
@@ -175,7 +191,10 @@ class GraspSearch:
         """Per frame, the finger's posed shapes when it stays open and is collision-free there, else None."""
         world = H[frames, None] @ self.open_poses[fi]
         sure = self.screen.hits(world, self.inside[fi][False])
-        return [None if s else self._fits(fi, w, placed[k], touching=False) for k, w, s in zip(frames, world, sure)]
+        centres = self._centres(fi, world)
+        clear = self.screen.clear(centres, self.screened[fi][False])
+        return [None if s else self._fits(fi, w, c, free, placed[k], touching=False)
+                for k, w, c, free, s in zip(frames, world, centres, clear, sure)]
 
     def grasps(self, H: np.ndarray) -> list[FrameGrasp]:
         """The grasp (or why none) at each hand pose of H (n, 4, 4: the hand frame in the object frame)."""
