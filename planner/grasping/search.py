@@ -66,6 +66,23 @@ class FrameGrasp:
     curvature: float = 0.0
 
 
+@dataclass
+class Placed:
+    """The shapes of the fingers placed so far, per frame: each frame searched on has those of the same fingers."""
+
+    shapes: list[list[Posed]]  # per frame
+    centres: np.ndarray  # (n, p, 3): their bounding spheres' centres, per frame
+    radii: np.ndarray  # (p,)
+
+    def add(self, posed: dict[int, list[Posed]], radii: np.ndarray) -> None:
+        """One more finger's shapes (`radii` their bounding spheres'), posed in the frames that go on."""
+        centres = np.zeros((len(self.shapes), len(radii), 3))
+        for k, shapes in posed.items():
+            self.shapes[k] = self.shapes[k] + shapes
+            centres[k] = [s.centre for s in shapes]
+        self.centres, self.radii = np.concatenate([self.centres, centres], axis=1), np.r_[self.radii, radii]
+
+
 def closing_direction(finger: FingerChain) -> np.ndarray:
     """Per joint, the sign in which the finger closes: from its open configuration towards mid-range (0 when open is mid-range)."""
     mid, span = 0.5 * (finger.lower + finger.upper), finger.upper - finger.lower
@@ -106,16 +123,12 @@ class GraspSearch:
         """What a finger shape is tested against the object as: a touching fingertip shrunk by the clearance."""
         return self.tip_spheres[fi] if (touching and shape.is_tip) else shape.geometry
 
-    def _centres(self, fi: int, world: np.ndarray) -> np.ndarray:
-        """(m, s, 3) the bounding-sphere centres of a finger's shapes posed at `world` (m, s, 4, 4)."""
-        return np.einsum("msij,sj->msi", world[..., :3, :3], self.bounds[fi][0]) + world[..., :3, 3]
-
-    def _fits(self, fi: int, world: np.ndarray, centres: np.ndarray, clear: np.ndarray, placed: list[Posed],
-              touching: bool) -> list[Posed] | None:
+    def _fits(self, fi: int, world: np.ndarray, centres: np.ndarray, clear: np.ndarray, near: np.ndarray,
+              placed: list[Posed], touching: bool) -> list[Posed] | None:
         """The finger's shapes (posed in the object frame, `world` (s, 4, 4), bounding spheres at `centres` (s, 3)) when
         collision-free with the object and the placed shapes, else None. Coal tests the object for the shapes the
         screen does not show `clear` of it, links nearest the fingertip first (the likeliest to touch it), then the
-        placed shapes whose bounding spheres reach the finger's."""
+        pairs of a shape and a placed one whose bounding spheres are `near` (s, len(placed))."""
         shapes, test = self.hand.fingers[fi].shapes, self.test
         transforms: list = [None] * len(shapes)
         for j in self.test_order[fi]:
@@ -124,17 +137,24 @@ class GraspSearch:
             transforms[j] = transform3s(world[j])
             if test.hits_object(self._probe(fi, shapes[j], touching), transforms[j]):
                 return None
-        radii = self.bounds[fi][1]
-        if placed:
-            others, other_radii = np.array([o.centre for o in placed]), np.array([o.radius for o in placed])
-            near = np.linalg.norm(centres[:, None] - others[None], axis=2) <= radii[:, None] + other_radii + SPHERE_MARGIN
-            for j, o in zip(*np.nonzero(near)):
-                if transforms[j] is None:
-                    transforms[j] = transform3s(world[j])
-                if test.hits_placed((shapes[j].geometry, transforms[j]), [(placed[o].geometry, placed[o].transform())]):
-                    return None
+        for j, o in zip(*np.nonzero(near)):
+            if transforms[j] is None:
+                transforms[j] = transform3s(world[j])
+            if test.hits_placed((shapes[j].geometry, transforms[j]), [(placed[o].geometry, placed[o].transform())]):
+                return None
         return [Posed(shape.geometry, pose, centre, float(r), tf)
-                for shape, pose, centre, r, tf in zip(shapes, world, centres, radii, transforms)]
+                for shape, pose, centre, r, tf in zip(shapes, world, centres, self.bounds[fi][1], transforms)]
+
+    def _screened(self, fi: int, world: np.ndarray, frames: np.ndarray, placed: Placed,
+                  touching: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For a finger posed at `world` (m, s, 4, 4) in `frames` (m,): its shapes' bounding-sphere centres (m, s, 3),
+        which shapes are certainly clear of the object (m, s) and which pairs of a shape and a placed one have
+        bounding spheres near enough to meet (m, s, placed)."""
+        centres = np.einsum("msij,sj->msi", world[..., :3, :3], self.bounds[fi][0]) + world[..., :3, 3]
+        clear = self.screen.clear(centres, self.screened[fi][touching])
+        reach = self.bounds[fi][1][:, None] + placed.radii + SPHERE_MARGIN
+        near = np.linalg.norm(centres[:, :, None] - placed.centres[frames][:, None], axis=3) <= reach
+        return centres, clear, near
 
     def _presses(self, fi: int, J: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Which contacts the finger can press, by its fingertip Jacobians J (m, 3, k): closing it (joints moving from
@@ -152,7 +172,7 @@ class GraspSearch:
         return c.ranked(key, self.p.max_candidates)
 
     def _place_finger(self, fi: int, H: np.ndarray, c: Candidates, contact: np.ndarray,
-                      placed: list[list[Posed]]) -> dict[int, tuple[np.ndarray, int, list[Posed]]]:
+                      placed: Placed) -> dict[int, tuple[np.ndarray, int, list[Posed]]]:
         """Per frame of the candidates, the finger's first collision-free contact: frame -> (q, point index, posed shapes)."""
         finger, p = self.hand.fingers[fi], self.p
         c, rank = self._ranked(c, contact)
@@ -175,26 +195,23 @@ class GraspSearch:
                 continue
             world = H[frame[ok], None] @ finger.shape_poses(q[ok])
             tried = np.flatnonzero(~self.screen.hits(world, self.inside[fi][True]))
-            centres = self._centres(fi, world[tried])
-            clear = self.screen.clear(centres, self.screened[fi][True])
-            for j, centre, free in zip(tried, centres, clear):
+            screens = self._screened(fi, world[tried], frame[ok[tried]], placed, touching=True)
+            for j, centres, clear, near in zip(tried, *screens):
                 k = ok[j]
                 if done[frame[k]]:
                     continue
-                posed = self._fits(fi, world[j], centre, free, placed[frame[k]], touching=True)
+                posed = self._fits(fi, world[j], centres, clear, near, placed.shapes[frame[k]], touching=True)
                 if posed is not None:
                     found[int(frame[k])] = (q[k], int(point[k]), posed)
                     done[frame[k]] = True
         return found
 
-    def _open_fits(self, fi: int, H: np.ndarray, frames: np.ndarray, placed: list[list[Posed]]) -> list[list[Posed] | None]:
+    def _open_fits(self, fi: int, H: np.ndarray, frames: np.ndarray, placed: Placed) -> list[list[Posed] | None]:
         """Per frame, the finger's posed shapes when it stays open and is collision-free there, else None."""
         world = H[frames, None] @ self.open_poses[fi]
         sure = self.screen.hits(world, self.inside[fi][False])
-        centres = self._centres(fi, world)
-        clear = self.screen.clear(centres, self.screened[fi][False])
-        return [None if s else self._fits(fi, w, c, free, placed[k], touching=False)
-                for k, w, c, free, s in zip(frames, world, centres, clear, sure)]
+        return [None if s else self._fits(fi, w, *screens, placed.shapes[k], touching=False)
+                for k, w, s, *screens in zip(frames, world, sure, *self._screened(fi, world, frames, placed, touching=False))]
 
     def grasps(self, H: np.ndarray) -> list[FrameGrasp]:
         """The grasp (or why none) at each hand pose of H (n, 4, 4: the hand frame in the object frame)."""
@@ -204,15 +221,15 @@ class GraspSearch:
         q = np.tile(self.hand.open_q, (n, 1))
         ends = np.cumsum([finger.dof for finger in self.hand.fingers])
         contact = -np.ones((n, f), int)
-        placed: list[list[Posed]] = [[] for _ in range(n)]
+        placed = Placed([[] for _ in range(n)], np.zeros((n, 0, 3)), np.zeros(0))
         for rank, fi in enumerate(self.hand.thumb_first):
             mine = candidates[fi]
             member = np.zeros(n, bool)
             member[alive] = True
             found = self._place_finger(fi, H, mine.subset(member[mine.frame]), contact, placed)
-            for k, (qf, point, posed) in found.items():
+            posed_now = {k: posed for k, (_, _, posed) in found.items()}
+            for k, (qf, point, _) in found.items():
                 q[k, ends[fi] - len(qf):ends[fi]], contact[k, fi] = qf, point
-                placed[k] += posed
             missing = np.array([k for k in alive if k not in found], int)
             if rank == 0:
                 outcome[missing] = "no_thumb_contact"
@@ -221,7 +238,8 @@ class GraspSearch:
                     if posed is None:
                         outcome[k] = "open_finger_collides"
                     else:
-                        placed[k] += posed
+                        posed_now[k] = posed
+            placed.add(posed_now, self.bounds[fi][1])
             alive = alive[outcome[alive] == ""]
             few = np.count_nonzero(contact[alive] >= 0, axis=1) + (f - rank - 1) < MIN_CONTACTS
             outcome[alive[few]] = "few_contacts"
