@@ -660,45 +660,47 @@ def test_the_carry_transit_can_use_the_roadmap_nodes(example):
 
 @pytest.mark.slow
 def test_graded_checks_densely_only_beside_a_tight_end(example):
-    """The example's picking hand as it approaches the statuette, where it comes within 3 mm of it (between the last
-    configuration of the Grasp phase farther than that and the first nearer, by bisection): motions out of there checked
-    graded cost a fraction of the checks at paddings fitted to the 3 mm throughout, and each one it passes keeps the
-    hand off the statuette by the independent check at ten times the fitted resolution. Its paddings must be ordered."""
+    """The robot at its initial configuration, the statuette standing 3 mm beside its first arm's palm (moved out from it
+    sideways, away from the other palm, by bisection): motions out of there checked graded cost a
+    fraction of the checks at paddings fitted to the 3 mm throughout, and each one it passes keeps the hand off the
+    statuette by the independent check at ten times the fitted resolution. Its paddings must be ordered."""
     from planner.collision.situation import Situation
     from planner.collision.validity import Graded
     from planner.collision.with_object import OBJECT
-    from planner.core.session import Session
-    from planner.motion.result import PHASES
 
     scene, roadmap, _ = example
-    motion = Session.open(EXAMPLE).result("motion")
-    grasp = np.flatnonzero(motion.phase == PHASES.index("Grasp"))
     planner = _phase_planner(scene, roadmap)
     idx = planner.contact.transit_idx
-    situation = Situation(None, motion.object_pose[grasp[0]])  # the statuette where it stands until lifted
+    q = scene.q_initial.copy()
+    first, other = scene.robot.spec.arm_names[:2]
+    palm = planner.arms.palm(q, first)[:3, 3]
+    out = palm - planner.arms.palm(q, other)[:3, 3]
+    out[2] = 0.0
+    out /= np.linalg.norm(out)
+    rotation, centre = scene.object_initial[:3, :3], np.asarray(scene.object_mesh.centroid)
 
-    def gap(q):
+    def beside(distance):
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = rotation, palm + distance * out - rotation @ centre
+        situation = Situation(None, pose)
         checks = planner.validities.of(situation, q, idx)
         model = checks.model
         obj = [o.name for o in model.geometry.geometryObjects].index(OBJECT)
-        return checks, min((d for k, d in checks.clearances(q).items() if obj in model.ends[k]), default=np.inf)
+        gaps = [d for k, d in checks.clearances(q).items() if obj in model.ends[k]]
+        return situation, checks, min(gaps, default=np.inf)
 
-    near = next(i for i in grasp if gap(motion.q[i])[1] < 0.003)
-    assert near > grasp[0], "the Grasp phase starts away from the statuette"
-    farther, nearer = motion.q[near - 1], motion.q[near]
-    low, high = 0.0, 1.0  # fractions of the way from `farther` to `nearer`: farther than 3 mm at low, nearer at high
+    low, high = 0.0, 0.5  # the statuette's centre this far out from the palm: nearer than 3 mm at low, not at high
     for _ in range(20):
         mid = (low + high) / 2
-        low, high = (low, mid) if gap(farther + mid * (nearer - farther))[1] < 0.003 else (mid, high)
-    q = farther + low * (nearer - farther)
-    checks, clearance = gap(q)
-    assert 0.0025 < clearance < 0.0035, clearance
+        low, high = (mid, high) if beside(mid)[2] < 0.003 else (low, mid)
+    situation, checks, gap = beside(high)
+    assert 0.0025 < gap < 0.0035, gap
     goal = q.copy()
-    goal[idx] = scene.q_initial[idx]
-    full, near_fitted = checks.transit_validities(q, goal)
-    graded = Graded(full, near_fitted)
+    goal[idx] = scene.robot.q_rest[idx]
+    full, near = checks.transit_validities(q, goal)
+    graded = Graded(full, near)
     with pytest.raises(ValueError, match="coarse paddings must be at least"):
-        Graded(near_fitted, full)
+        Graded(near, full)
     rng = np.random.default_rng(3)
     moved = np.isin(np.arange(len(q)), idx)
     ends = [e for e in (q + moved * rng.normal(0.0, 0.3, len(q)) for _ in range(40)) if full.state_valid(e)][:6]
@@ -707,13 +709,13 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
     passed = 0
     for end in ends:  # RRT-like steps out of the tight spot
         ok = {}
-        for name, validity in (("graded", graded), ("fitted", near_fitted)):
+        for name, validity in (("graded", graded), ("fitted", near)):
             before = validity.checks
             ok[name] = validity.motion_valid(q, end, ends=False)
             spent[name] += validity.checks - before
         if ok["graded"]:
             passed += 1
-            for s in np.linspace(0.0, 1.0, 10 * near_fitted.samples(q, end, "object")):  # the pairs fitted to the 3 mm
+            for s in np.linspace(0.0, 1.0, 10 * near.samples(q, end, "object")):  # the pairs fitted to the 3 mm
                 assert not oracle.object_hits(q + s * (end - q), situation.pose)
     assert passed, "some motions must pass"
     assert spent["graded"] < 0.5 * spent["fitted"], spent
