@@ -4,10 +4,11 @@ A shape certainly hits the object when a point of the object's point set lies in
 lie on the surface, so a triangle crosses the shape (coal, testing the mesh's triangles, says the
 same). Boxes and spheres are tested so (the kd-tree gives the points nearest each posed shape's
 centre); other shapes are left to coal. A shape certainly misses the object when its bounding sphere
-does: the surface's cover (points on it such that every surface point lies within a known distance
-of one, `surface_cover`) has no point within the sphere's radius plus that distance. Two shapes
-certainly miss each other when their bounding spheres are apart. A screen only ever answers where
-the exact test's answer is known; a shape it does not settle goes to coal.
+does: no point of the set lies within the sphere's radius plus `reach`, a distance within which every
+point of the surface has a point of the set (bounded through a cover of the surface whose spacing is
+known by construction, `surface_cover`). Two shapes certainly miss each other when their bounding
+spheres are apart. A screen only ever answers where the exact test's answer is known; a shape it does
+not settle goes to coal.
 """
 from __future__ import annotations
 
@@ -73,8 +74,8 @@ class ObjectScreen:
     def __init__(self, tree: cKDTree, triangles: np.ndarray, spacing: float):
         self.tree = tree
         cover, within = surface_cover(triangles, spacing)
-        # every surface point lies within `within` of a cover point, and each cover point within its distance to the
-        # point set of a point: so within `reach` of one
+        # every surface point lies within `within` of a cover point, and every cover point within the largest of their
+        # distances to the point set of a point of it: so every surface point lies within `reach` of a point of the set
         self.reach = within + float(tree.query(cover)[0].max(initial=0.0))
 
     def clear(self, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -116,6 +117,7 @@ class Posed:
         self.geometry, self.pose, self.centre, self.radius, self._transform = geometry, pose, centre, radius, transform
 
     def transform(self) -> coal.Transform3s:
+        """coal's transform of the pose (made once)."""
         if self._transform is None:
             self._transform = transform3s(self.pose)
         return self._transform
