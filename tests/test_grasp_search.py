@@ -7,8 +7,10 @@ import fcl
 import numpy as np
 import pytest
 from scipy.optimize import nnls
+from scipy.spatial import cKDTree
 from test_grasp_list import SMALL, _crossings, _fcl_mesh, _fcl_shape, recheck
 
+from planner.collision.object_screens import surface_cover
 from planner.grasping.finger_workspace import hand_workspaces
 from planner.grasping.grasp_list import compute_grasp_list, grasp_centre, grasp_frames, search_object
 from planner.grasping.quality import contact_wrenches, hull_epsilon, separated
@@ -109,11 +111,11 @@ def test_ik_groups_stop_as_if_solved_alone(default_scene):
     targets = finger.tip_positions(rng.uniform(lower, upper, (40, finger.dof)))
     q0 = rng.uniform(lower, upper, (40, finger.dof))
     groups = rng.integers(0, 5, 40)
-    q, err = finger.ik(targets, q0, lower, upper, 2e-4, 4, groups=groups)
+    q, err, J = finger.ik(targets, q0, lower, upper, 2e-4, 4, groups=groups)
     for g in range(5):
         rows = groups == g
-        q_alone, err_alone = finger.ik(targets[rows], q0[rows], lower, upper, 2e-4, 4)
-        assert np.array_equal(q[rows], q_alone) and np.array_equal(err[rows], err_alone)
+        q_alone, err_alone, J_alone = finger.ik(targets[rows], q0[rows], lower, upper, 2e-4, 4)
+        assert np.array_equal(q[rows], q_alone) and np.array_equal(err[rows], err_alone) and np.array_equal(J[rows], J_alone)
 
 
 def test_candidates_are_the_targets_in_the_finger_spheres_in_kd_tree_order(search_and_frames):
@@ -170,6 +172,46 @@ def test_screened_hits_are_hits_by_fcl(search_and_frames, default_scene):
         hits = [fcl.collide(fcl.CollisionObject(_fcl_shape(s.geometry, 0.0), fcl.Transform(T[:3, :3], T[:3, 3])), obj,
                             fcl.CollisionRequest(), fcl.CollisionResult()) > 0 for s, T in zip(finger.shapes, world[k])]
         assert any(hits), k
+
+
+def test_screened_clear_shapes_miss_by_fcl(search_and_frames, default_scene):
+    """Finger poses near the object: every shape the screen calls clear, its bounding sphere included, fcl finds apart
+    from the mesh; and the screen calls many clear."""
+    search, H = search_and_frames
+    finger_index = search.hand.thumb_first[2]
+    finger = search.hand.fingers[finger_index]
+    rng = np.random.default_rng(2)
+    world = H[rng.integers(0, len(H), 300)][:, None] @ finger.shape_poses(rng.uniform(finger.lower, finger.upper, (300, finger.dof)))
+    centres = np.array([[T[:3, :3] @ np.asarray(s.geometry.aabb_center) + T[:3, 3] for s, T in zip(finger.shapes, w)] for w in world])
+    radii = np.array([s.geometry.aabb_radius for s in finger.shapes])
+    clear = search.screen.clear(centres, radii)
+    assert 0.2 < clear.mean() < 0.9
+    obj = _fcl_mesh(default_scene.object_mesh)
+    for k, j in zip(*np.nonzero(clear)):
+        T, ball = world[k, j], fcl.CollisionObject(fcl.Sphere(radii[j]), fcl.Transform(centres[k, j]))
+        shape = fcl.CollisionObject(_fcl_shape(finger.shapes[j].geometry, 0.0), fcl.Transform(T[:3, :3], T[:3, 3]))
+        assert fcl.distance(ball, obj, fcl.DistanceRequest(), fcl.DistanceResult()) > 0, (k, j)
+        assert fcl.collide(shape, obj, fcl.CollisionRequest(), fcl.CollisionResult()) == 0, (k, j)
+
+
+def test_every_surface_point_lies_near_the_cover(default_scene):
+    mesh = default_scene.object_mesh
+    points, within = surface_cover(np.asarray(mesh.triangles), 0.004)
+    assert within <= 0.004 and len(points) < 20 * mesh.area / 0.004**2
+    samples = np.random.default_rng(3).random((4000, 2))
+    folded = samples.sum(axis=1) > 1
+    samples[folded] = 1 - samples[folded]  # uniform on each triangle
+    faces = np.random.default_rng(4).integers(0, len(mesh.faces), 4000)
+    v = mesh.vertices[mesh.faces[faces]]
+    surface = v[:, 0] + samples[:, :1] * (v[:, 1] - v[:, 0]) + samples[:, 1:] * (v[:, 2] - v[:, 0])
+    assert cKDTree(points).query(surface)[0].max() <= within + 1e-12
+    tri = np.asarray(mesh.triangles)
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    for p in points[:: max(1, len(points) // 300)]:  # each cover point lies in a triangle: on its plane, inside its edges
+        plane = np.abs(np.einsum("fi,fi->f", p - tri[:, 0], normals)) <= 1e-12 * np.linalg.norm(normals, axis=1)
+        inside = np.all([np.einsum("fi,fi->f", np.cross(tri[:, (i + 1) % 3] - tri[:, i], p - tri[:, i]), normals) >= -1e-18
+                         for i in range(3)], axis=0)
+        assert np.any(plane & inside), p
 
 
 def test_separated_wrench_sets_are_not_force_closed():

@@ -9,6 +9,7 @@ catches a planner whose model is blind to the carried object's obstacles.
 """
 from __future__ import annotations
 
+import itertools
 import shutil
 from pathlib import Path
 
@@ -16,6 +17,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from oracle import Oracle
+from test_grasp_list import _crossings
 
 from planner.motion.result import MotionParams
 from planner.motion.space import JointSpace
@@ -695,25 +697,28 @@ def test_the_carry_transit_can_use_the_roadmap_nodes(example):
 
 @pytest.mark.slow
 def test_graded_checks_densely_only_beside_a_tight_end(example):
-    """The example's picking hand as it grasps, the statuette lowered until it is 3 mm from the hand: motions out of
-    there checked graded cost a fraction of the checks at paddings fitted to the 3 mm throughout, and each one it passes
-    keeps the hand off the statuette by the independent check at ten times the fitted resolution. Its paddings must be
-    ordered."""
+    """The robot at its initial configuration, the statuette standing 3 mm beside its first arm's palm (moved out from it
+    sideways, away from the other palm, by bisection): motions out of there checked graded cost a
+    fraction of the checks at paddings fitted to the 3 mm throughout, and each one it passes keeps the hand off the
+    statuette by the independent check at ten times the fitted resolution. Its paddings must be ordered."""
     from planner.collision.situation import Situation
     from planner.collision.validity import Graded
     from planner.collision.with_object import OBJECT
-    from planner.core.session import Session
-    from planner.motion.result import PHASES
 
     scene, roadmap, _ = example
-    motion = Session.open(EXAMPLE).result("motion")
-    q = motion.q[np.flatnonzero(motion.phase == PHASES.index("Carry"))[0]]
     planner = _phase_planner(scene, roadmap)
     idx = planner.contact.transit_idx
+    q = scene.q_initial.copy()
+    first, other = scene.robot.spec.arm_names[:2]
+    palm = planner.arms.palm(q, first)[:3, 3]
+    out = palm - planner.arms.palm(q, other)[:3, 3]
+    out[2] = 0.0
+    out /= np.linalg.norm(out)
+    rotation, centre = scene.object_initial[:3, :3], np.asarray(scene.object_mesh.centroid)
 
-    def lowered(dz):
-        pose = scene.object_initial.copy()
-        pose[2, 3] -= dz
+    def beside(distance):
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = rotation, palm + distance * out - rotation @ centre
         situation = Situation(None, pose)
         checks = planner.validities.of(situation, q, idx)
         model = checks.model
@@ -721,13 +726,14 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
         gaps = [d for k, d in checks.clearances(q).items() if obj in model.ends[k]]
         return situation, checks, min(gaps, default=np.inf)
 
-    low, high = 0.0, 0.05
-    for _ in range(14):  # the drop that leaves 3 mm
-        low, high = ((low + high) / 2, high) if lowered((low + high) / 2)[2] < 0.003 else (low, (low + high) / 2)
-    situation, checks, gap = lowered(high)
+    low, high = 0.0, 0.5  # the statuette's centre this far out from the palm: nearer than 3 mm at low, not at high
+    for _ in range(20):
+        mid = (low + high) / 2
+        low, high = (mid, high) if beside(mid)[2] < 0.003 else (low, mid)
+    situation, checks, gap = beside(high)
     assert 0.0025 < gap < 0.0035, gap
     goal = q.copy()
-    goal[idx] = scene.q_initial[idx]
+    goal[idx] = scene.robot.q_rest[idx]
     full, near = checks.transit_validities(q, goal)
     graded = Graded(full, near)
     with pytest.raises(ValueError, match="coarse paddings must be at least"):
@@ -755,9 +761,12 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
 @pytest.mark.slow
 def test_the_hull_screen_changes_no_answer(example):
     """A situation model whose object pairs are screened by the object's convex hull answers every check as the same
-    model without the screen: along the example's Carry, where the placing hand closes on the statuette, so that some
-    configurations hit the hull and not the statuette (counted with a model whose object is the hull itself)."""
+    model without the screen: along the example's Carry (the object held), and with the statuette standing where a
+    fingertip of the Carry's first configuration lies in a pocket of its hull, centimetres from the statuette itself
+    (pockets found by sampling the hull; the fingers then moved at random), so that some configurations hit the hull
+    and not the statuette (counted with a model whose object is the hull itself)."""
     import coal
+    import pinocchio as pin
 
     from planner.collision.checker import build_collision_model
     from planner.collision.shapes import coal_convex, coal_mesh
@@ -772,20 +781,63 @@ def test_the_hull_screen_changes_no_answer(example):
     carry = np.flatnonzero(motion.phase == PHASES.index("Carry"))
     arm = robot.spec.arm_names[motion.holder[carry[0]]]
     planner = _phase_planner(scene, roadmap)
-    situation = Situation(arm, np.linalg.inv(motion.object_pose[carry[0]]) @ planner.arms.palm(motion.q[carry[0]], arm))
     cm = build_collision_model(robot, scene.environment)
     idx = planner.contact.transit_idx
     profile = transit_profile(roadmap.resolution, 0.02, 0.008)
     hull: coal.CollisionGeometry = coal_convex(scene.object_mesh.convex_hull)
     mesh = coal_mesh(scene.object_mesh)
-    screened, plain, as_hull = (make_validity(situation_model(cm, shape, situation, (), idx, screen), profile, "moving")
-                                for shape, screen in ((mesh, hull), (mesh, None), (hull, None)))
-    assert screened.seg.cm.twins is not None and plain.seg.cm.twins is None
-    hull_only = 0
-    for q in motion.q[carry[::2]]:
-        for subset in ("moving", "changed", "object"):
-            answer = plain.on(subset).state_valid(q)
-            assert screened.on(subset).state_valid(q) == answer, f"subset {subset}"
-            hull_only += answer and not as_hull.on(subset).state_valid(q)
-        assert screened.colliding_pairs(q) == plain.colliding_pairs(q)
-    assert hull_only, "some configurations must hit the hull and not the statuette"
+
+    def models(situation):
+        return [make_validity(situation_model(cm, shape, situation, (), idx, screen), profile, "moving")
+                for shape, screen in ((mesh, hull), (mesh, None), (hull, None))]
+
+    def hull_only(situation, configurations) -> int:
+        screened, plain, as_hull = models(situation)
+        assert screened.seg.cm.twins is not None and plain.seg.cm.twins is None
+        count = 0
+        for q in configurations:
+            for subset in ("moving", "changed", "object"):
+                answer = plain.on(subset).state_valid(q)
+                assert screened.on(subset).state_valid(q) == answer, f"subset {subset}"
+                count += answer and not as_hull.on(subset).state_valid(q)
+            assert screened.colliding_pairs(q) == plain.colliding_pairs(q)
+        return count
+
+    q = motion.q[carry[0]]
+    hold = np.linalg.inv(motion.object_pose[carry[0]]) @ planner.arms.palm(q, arm)
+    found = hull_only(Situation(arm, hold), motion.q[carry[::2]])
+    rng = np.random.default_rng(0)
+    fingers = np.concatenate(list(robot.hand_idx.values()))
+    moved = [q]
+    for _ in range(12):
+        moved.append(q.copy())
+        moved[-1][fingers] = rng.uniform(robot.lower[fingers], robot.upper[fingers])
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    tips = [data.oMf[robot.frame_id(robot.spec.arm(a).hand.prefixed(f.tip_frame))].translation
+            for a in robot.spec.arm_names for f in robot.spec.arm(a).hand.fingers]
+    rotation = scene.object_initial[:3, :3]
+    for pocket, tip in itertools.product(_hull_pockets(scene.object_mesh, 0.03, rng)[:3], tips):
+        if found:
+            break
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = rotation, tip - rotation @ pocket
+        found += hull_only(Situation(None, pose), moved)
+    assert found, "some configurations must hit the hull and not the statuette"
+
+
+def _hull_pockets(mesh, clearance: float, rng: np.random.Generator) -> np.ndarray:
+    """Points inside a mesh's convex hull, outside the mesh (odd crossings of a ray) and at least `clearance` from its
+    surface (by 100,000 points sampled on it), the farthest first."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    hull = mesh.convex_hull
+    points = rng.uniform(hull.bounds[0], hull.bounds[1], (4000, 3))
+    inside_hull = np.all(np.einsum("fi,pi->pf", hull.face_normals, points)
+                         < np.einsum("fi,fi->f", hull.face_normals, hull.triangles[:, 0]), axis=1)
+    surface, _ = trimesh.sample.sample_surface(mesh, 100_000, seed=1)
+    gap = cKDTree(surface).query(points)[0]
+    keep = np.flatnonzero(inside_hull & (gap > clearance + 0.002))  # the sampled points lie about a millimetre apart
+    keep = [k for k in keep if _crossings(points[k], np.array([0.36, 0.48, 0.8]), mesh.triangles) % 2 == 0]
+    return points[sorted(keep, key=lambda k: -gap[k])]

@@ -2,13 +2,13 @@
 
 A candidate is an object point whose fingertip target (the point pushed out along its normal by the
 fingertip radius) lies in one of the finger's workspace spheres (the spheres are disjoint: the
-hierarchy puts each next centre outside the spheres before it), tagged with that sphere. One query of
-a kd-tree over the targets takes every sphere of every frame at once. A frame's candidates come in
-the order in which the object's own kd-tree lists the points (ties in a ranking keep it).
+hierarchy puts each next centre outside the spheres before it), tagged with that sphere. Per sphere,
+one query between a kd-tree over its centres in every frame and one over the targets finds them all.
+A frame's candidates come in the order in which the object's own kd-tree lists the points (ties in a
+ranking keep it).
 """
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,13 +60,14 @@ class CandidateFinder:
 
     def __call__(self, H: np.ndarray) -> Candidates:
         """Every frame's candidates; `H` (n, 4, 4) are the hand poses in the object frame."""
-        ws, s = self.ws, len(self.ws.radii)
+        ws = self.ws
         centres = ws.centres @ H[:, :3, :3].transpose(0, 2, 1) + H[:, None, :3, 3]  # (n, s, 3): the spheres, object frame
-        found = self.tree.query_ball_point(centres.reshape(-1, 3), np.tile(ws.radii, len(H)), return_sorted=False) if s else []
-        lengths = np.fromiter(map(len, found), int, len(found))
-        query = np.repeat(np.arange(len(found)), lengths)
-        point = np.fromiter(itertools.chain.from_iterable(found), int, int(lengths.sum()))
-        frame, sphere = query // max(s, 1), query % max(s, 1)
+        # per sphere, the (frame, point) pairs within its radius: two kd-trees, pairs as arrays (no list per query)
+        pairs = [cKDTree(centres[:, j]).sparse_distance_matrix(self.tree, r, output_type="ndarray") if len(H) else
+                 np.zeros(0, [("i", int), ("j", int)]) for j, r in enumerate(ws.radii)]
+        frame = np.concatenate([p["i"] for p in pairs] + [np.zeros(0, int)]).astype(int)
+        point = np.concatenate([p["j"] for p in pairs] + [np.zeros(0, int)]).astype(int)
+        sphere = np.repeat(np.arange(len(pairs)), [len(p) for p in pairs]).astype(int)
         order = np.lexsort((self.position[point], frame))
         frame, sphere, point = frame[order], sphere[order], point[order]
         distance = np.linalg.norm(self.targets[point] - centres[frame, sphere], axis=1)

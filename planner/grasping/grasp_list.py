@@ -47,7 +47,7 @@ class GraspParams:
     """Everything a grasp list depends on besides the hand, the mesh and the seed."""
 
     positions: int = bounded(80, 1, 1000, "positions", "grasp-frame positions on a grid in the object's bounding box")
-    orientations: int = bounded(80, 1, 1000, "orientations", "grasp-frame orientations per position (an incremental SO(3) sequence)")
+    orientations: int = bounded(160, 1, 1000, "orientations", "grasp-frame orientations per position (an incremental SO(3) sequence)")
     mu: float = bounded(0.5, 0.01, 2.0, "(friction coefficient)", "friction coefficient of the fingertip contacts")
     cone_edges: int = bounded(8, 3, 64, "edges", "edges of the linearised friction cone")
     point_step: float = bounded(0.5, 0.2, 5.0, "fingertip radii", "spacing of the object's surface points")

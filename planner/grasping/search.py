@@ -11,7 +11,8 @@ sample; a solution counts when closing the finger pushes its tip into the surfac
 `press_angle` of the inward normal: a finger can only squeeze by closing). A frame takes its first
 candidate, in rank order, whose finger is collision-free with the object (the fingertip sphere
 shrunk by a clearance, since it touches) and with the fingers already placed: certain hits are
-screened out for all candidates at once (planner/collision/object_screens.py), coal's exact test decides the rest. A finger
+screened out for all candidates at once, and so are shapes certainly clear of the object
+(planner/collision/object_screens.py); coal's exact test decides the rest. A finger
 without contact stays open and must be collision-free too. Grasps of >= 3 contacts go to the
 stability filter, where a separating hyperplane rules most out before the exact hull.
 """
@@ -65,6 +66,23 @@ class FrameGrasp:
     curvature: float = 0.0
 
 
+@dataclass
+class Placed:
+    """The shapes of the fingers placed so far, per frame: each frame searched on has those of the same fingers."""
+
+    shapes: list[list[Posed]]  # per frame
+    centres: np.ndarray  # (n, p, 3): their bounding spheres' centres, per frame
+    radii: np.ndarray  # (p,)
+
+    def add(self, posed: dict[int, list[Posed]], radii: np.ndarray) -> None:
+        """One more finger's shapes (`radii` their bounding spheres'), posed in the frames that go on."""
+        centres = np.zeros((len(self.shapes), len(radii), 3))
+        for k, shapes in posed.items():
+            self.shapes[k] = self.shapes[k] + shapes
+            centres[k] = [s.centre for s in shapes]
+        self.centres, self.radii = np.concatenate([self.centres, centres], axis=1), np.r_[self.radii, radii]
+
+
 def closing_direction(finger: FingerChain) -> np.ndarray:
     """Per joint, the sign in which the finger closes: from its open configuration towards mid-range (0 when open is mid-range)."""
     mid, span = 0.5 * (finger.lower + finger.upper), finger.upper - finger.lower
@@ -79,7 +97,7 @@ class GraspSearch:
         self.hand, self.workspaces, self.obj, self.p = hand, workspaces, obj, p
         self.test = ObjectTest(mesh)
         self.triangles = np.asarray(mesh.triangles, float)
-        self.screen = ObjectScreen(obj.tree)
+        self.screen = ObjectScreen(obj.tree, self.triangles, obj.step)
         self.seeds = [w.seeds() for w in workspaces]
         self.limits = [f.reduced_limits(limit_margin) for f in hand.fingers]
         self.torque_scale = obj.radius
@@ -97,35 +115,51 @@ class GraspSearch:
         spheres = [[bounding(s.geometry, np.eye(4)) for s in f.shapes] for f in hand.fingers]
         self.test_order = [sorted(range(len(f.shapes)), key=lambda j, f=f: (f.shapes[j].is_tip, -f.shapes[j].link)) for f in hand.fingers]
         self.bounds = [(np.array([c for c, _ in b]).reshape(-1, 3), np.array([r for _, r in b])) for b in spheres]
+        # per finger and touching or open, the radii screened for clearance (a touching fingertip never is: inf)
+        self.screened = [{touching: np.where([touching and s.is_tip for s in f.shapes], np.inf, radii)
+                          for touching in (True, False)} for f, (_, radii) in zip(hand.fingers, self.bounds)]
 
     def _probe(self, fi: int, shape, touching: bool) -> Geometry:
         """What a finger shape is tested against the object as: a touching fingertip shrunk by the clearance."""
         return self.tip_spheres[fi] if (touching and shape.is_tip) else shape.geometry
 
-    def _fits(self, fi: int, world: np.ndarray, placed: list[Posed], touching: bool) -> list[Posed] | None:
-        """The finger's shapes (posed in the object frame, `world` (s, 4, 4)) when collision-free with the object and the
-        placed shapes, else None. Coal tests the object first, links nearest the fingertip first (the likeliest to
-        touch it), then the placed shapes whose bounding spheres reach the finger's."""
+    def _fits(self, fi: int, world: np.ndarray, centres: np.ndarray, clear: np.ndarray, near: np.ndarray,
+              placed: list[Posed], touching: bool) -> list[Posed] | None:
+        """The finger's shapes (posed in the object frame, `world` (s, 4, 4), bounding spheres at `centres` (s, 3)) when
+        collision-free with the object and the placed shapes, else None. Coal tests the object for the shapes the
+        screen does not show `clear` of it, links nearest the fingertip first (the likeliest to touch it), then the
+        pairs of a shape and a placed one whose bounding spheres are `near` (s, len(placed))."""
         shapes, test = self.hand.fingers[fi].shapes, self.test
         transforms: list = [None] * len(shapes)
         for j in self.test_order[fi]:
+            if clear[j]:
+                continue
             transforms[j] = transform3s(world[j])
             if test.hits_object(self._probe(fi, shapes[j], touching), transforms[j]):
                 return None
-        centres = np.einsum("sij,sj->si", world[:, :3, :3], self.bounds[fi][0]) + world[:, :3, 3]
-        radii = self.bounds[fi][1]
-        if placed:
-            others, other_radii = np.array([o[2] for o in placed]), np.array([o[3] for o in placed])
-            near = np.linalg.norm(centres[:, None] - others[None], axis=2) <= radii[:, None] + other_radii + SPHERE_MARGIN
-            for j, o in zip(*np.nonzero(near)):
-                if test.hits_placed((shapes[j].geometry, transforms[j]), [placed[o][:2]]):
-                    return None
-        return [(shape.geometry, tf, centre, float(r)) for shape, tf, centre, r in zip(shapes, transforms, centres, radii)]
+        for j, o in zip(*np.nonzero(near)):
+            if transforms[j] is None:
+                transforms[j] = transform3s(world[j])
+            if test.hits_placed((shapes[j].geometry, transforms[j]), [(placed[o].geometry, placed[o].transform())]):
+                return None
+        return [Posed(shape.geometry, pose, centre, float(r), tf)
+                for shape, pose, centre, r, tf in zip(shapes, world, centres, self.bounds[fi][1], transforms)]
 
-    def _presses(self, fi: int, q: np.ndarray, normals: np.ndarray) -> np.ndarray:
-        """Which contacts the finger can press: closing it (joints moving from the open configuration towards
-        mid-range) moves the fingertip into the surface, within `press_angle` of the inward normal."""
-        _, J = self.hand.fingers[fi].jacobians(q)
+    def _screened(self, fi: int, world: np.ndarray, frames: np.ndarray, placed: Placed,
+                  touching: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For a finger posed at `world` (m, s, 4, 4) in `frames` (m,): its shapes' bounding-sphere centres (m, s, 3),
+        which shapes are certainly clear of the object (m, s) and which pairs of a shape and a placed one have
+        bounding spheres near enough to meet (m, s, placed)."""
+        centres = np.einsum("msij,sj->msi", world[..., :3, :3], self.bounds[fi][0]) + world[..., :3, 3]
+        clear = self.screen.clear(centres, self.screened[fi][touching])
+        reach = self.bounds[fi][1][:, None] + placed.radii + SPHERE_MARGIN
+        near = np.linalg.norm(centres[:, :, None] - placed.centres[frames][:, None], axis=3) <= reach
+        return centres, clear, near
+
+    def _presses(self, fi: int, J: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Which contacts the finger can press, by its fingertip Jacobians J (m, 3, k): closing it (joints moving from
+        the open configuration towards mid-range) moves the fingertip into the surface, within `press_angle` of the
+        inward normal."""
         motion = J @ self.closing[fi]
         norm = np.linalg.norm(motion, axis=1)
         return -np.einsum("ij,ij->i", motion, normals) > np.cos(self.p.press_angle) * np.maximum(norm, 1e-12)
@@ -138,7 +172,7 @@ class GraspSearch:
         return c.ranked(key, self.p.max_candidates)
 
     def _place_finger(self, fi: int, H: np.ndarray, c: Candidates, contact: np.ndarray,
-                      placed: list[list[Posed]]) -> dict[int, tuple[np.ndarray, int, list[Posed]]]:
+                      placed: Placed) -> dict[int, tuple[np.ndarray, int, list[Posed]]]:
         """Per frame of the candidates, the finger's first collision-free contact: frame -> (q, point index, posed shapes)."""
         finger, p = self.hand.fingers[fi], self.p
         c, rank = self._ranked(c, contact)
@@ -153,29 +187,31 @@ class GraspSearch:
             R = H[frame, :3, :3]
             targets = np.einsum("ki,kij->kj", self.targets[fi][point] - H[frame, :3, 3], R)
             _, seed = self.seeds[fi].query(targets)
-            q, err = finger.ik(targets, self.workspaces[fi].seed_q[seed], lower, upper, p.ik_tolerance, p.ik_iterations,
-                               groups=frame)
+            q, err, J = finger.ik(targets, self.workspaces[fi].seed_q[seed], lower, upper, p.ik_tolerance,
+                                  p.ik_iterations, groups=frame)
             ok = np.flatnonzero(err < p.ik_tolerance)
-            ok = ok[self._presses(fi, q[ok], np.einsum("ki,kij->kj", self.obj.normals[point[ok]], R[ok]))]
+            ok = ok[self._presses(fi, J[ok], np.einsum("ki,kij->kj", self.obj.normals[point[ok]], R[ok]))]
             if len(ok) == 0:
                 continue
             world = H[frame[ok], None] @ finger.shape_poses(q[ok])
-            sure = self.screen.hits(world, self.inside[fi][True])
-            for j in np.flatnonzero(~sure):
+            tried = np.flatnonzero(~self.screen.hits(world, self.inside[fi][True]))
+            screens = self._screened(fi, world[tried], frame[ok[tried]], placed, touching=True)
+            for j, centres, clear, near in zip(tried, *screens):
                 k = ok[j]
                 if done[frame[k]]:
                     continue
-                posed = self._fits(fi, world[j], placed[frame[k]], touching=True)
+                posed = self._fits(fi, world[j], centres, clear, near, placed.shapes[frame[k]], touching=True)
                 if posed is not None:
                     found[int(frame[k])] = (q[k], int(point[k]), posed)
                     done[frame[k]] = True
         return found
 
-    def _open_fits(self, fi: int, H: np.ndarray, frames: np.ndarray, placed: list[list[Posed]]) -> list[list[Posed] | None]:
+    def _open_fits(self, fi: int, H: np.ndarray, frames: np.ndarray, placed: Placed) -> list[list[Posed] | None]:
         """Per frame, the finger's posed shapes when it stays open and is collision-free there, else None."""
         world = H[frames, None] @ self.open_poses[fi]
         sure = self.screen.hits(world, self.inside[fi][False])
-        return [None if s else self._fits(fi, w, placed[k], touching=False) for k, w, s in zip(frames, world, sure)]
+        return [None if s else self._fits(fi, w, *screens, placed.shapes[k], touching=False)
+                for k, w, s, *screens in zip(frames, world, sure, *self._screened(fi, world, frames, placed, touching=False))]
 
     def grasps(self, H: np.ndarray) -> list[FrameGrasp]:
         """The grasp (or why none) at each hand pose of H (n, 4, 4: the hand frame in the object frame)."""
@@ -185,15 +221,15 @@ class GraspSearch:
         q = np.tile(self.hand.open_q, (n, 1))
         ends = np.cumsum([finger.dof for finger in self.hand.fingers])
         contact = -np.ones((n, f), int)
-        placed: list[list[Posed]] = [[] for _ in range(n)]
+        placed = Placed([[] for _ in range(n)], np.zeros((n, 0, 3)), np.zeros(0))
         for rank, fi in enumerate(self.hand.thumb_first):
             mine = candidates[fi]
             member = np.zeros(n, bool)
             member[alive] = True
             found = self._place_finger(fi, H, mine.subset(member[mine.frame]), contact, placed)
-            for k, (qf, point, posed) in found.items():
+            posed_now = {k: posed for k, (_, _, posed) in found.items()}
+            for k, (qf, point, _) in found.items():
                 q[k, ends[fi] - len(qf):ends[fi]], contact[k, fi] = qf, point
-                placed[k] += posed
             missing = np.array([k for k in alive if k not in found], int)
             if rank == 0:
                 outcome[missing] = "no_thumb_contact"
@@ -202,7 +238,8 @@ class GraspSearch:
                     if posed is None:
                         outcome[k] = "open_finger_collides"
                     else:
-                        placed[k] += posed
+                        posed_now[k] = posed
+            placed.add(posed_now, self.bounds[fi][1])
             alive = alive[outcome[alive] == ""]
             few = np.count_nonzero(contact[alive] >= 0, axis=1) + (f - rank - 1) < MIN_CONTACTS
             outcome[alive[few]] = "few_contacts"

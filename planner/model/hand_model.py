@@ -60,17 +60,27 @@ class FingerChain:
 
     @functools.cached_property
     def _terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Per joint: M_R, M_R K, M_R K^2 (so that M_R Rot(q) = A + sin q B + (1 - cos q) C) and M_t."""
+        """Per joint: M_R, M_R K, M_R K^2 (so that M_R Rot(q) = A + sin q B + (1 - cos q) C), each (k, 3, 3, 1) to
+        broadcast over configurations on the last axis, and M_t."""
         K = _skew(self.axes)
         A = self.placements[:, :3, :3]
-        return A, A @ K, A @ K @ K, self.placements[:, :3, 3]
+        return A[..., None], (A @ K)[..., None], (A @ K @ K)[..., None], self.placements[:, :3, 3]
+
+    @functools.cached_property
+    def _axis_columns(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per joint, the column of its frame's rotation its axis picks and the axis's one nonzero component, when every
+        axis lies along a coordinate axis (R @ axis is then that column times it, rounded the same); None otherwise."""
+        if np.any(np.count_nonzero(self.axes, axis=1) != 1):
+            return None
+        column = np.argmax(np.abs(self.axes), axis=1)
+        return column, self.axes[np.arange(self.dof), column][:, None]
 
     def chain(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joint rotations (N, k, 3, 3) and origins (N, k, 3) in the hand frame for configurations q (N, k)."""
         q = np.atleast_2d(q)
         A, B, C, t = self._terms
-        s, c = np.sin(q)[:, :, None, None], 1.0 - np.cos(q)[:, :, None, None]
-        local = A + s * B + c * C
+        s, c = np.sin(q).T[:, None, None], (1.0 - np.cos(q)).T[:, None, None]  # (k, 1, 1, N): long inner loops
+        local = np.ascontiguousarray(np.moveaxis(A + s * B + c * C, 3, 0))
         R = np.empty((len(q), self.dof, 3, 3))
         p = np.empty((len(q), self.dof, 3))
         R_prev, p_prev = local[:, 0], t[0]  # the hand frame is the identity: its products are exact copies
@@ -97,33 +107,46 @@ class FingerChain:
         """Fingertip positions (N, 3) and their position Jacobians (N, 3, k) in the hand frame."""
         R, p = self.chain(q)
         tips = R[:, -1] @ self.tip[:3, 3] + p[:, -1]
-        axes = (R @ self.axes[:, :, None])[..., 0]
+        if self._axis_columns is None:
+            axes = (R @ self.axes[:, :, None])[..., 0]
+        else:
+            column, sign = self._axis_columns
+            axes = R.swapaxes(-1, -2)[:, np.arange(self.dof), column] * sign
         J = _cross(axes, tips[:, None, :] - p)
         return tips, J.transpose(0, 2, 1)
 
     def ik(self, targets: np.ndarray, q0: np.ndarray, lower: np.ndarray, upper: np.ndarray, tolerance: float,
-           iterations: int = 10, damping: float = 1e-3, groups: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Batched damped least squares within [lower, upper]: configurations (N, k) and their tip errors (N,).
+           iterations: int = 10, damping: float = 1e-3,
+           groups: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Batched damped least squares within [lower, upper]: configurations (N, k), their tip errors (N,) and
+        fingertip Jacobians (N, 3, k).
 
         Rows of one group (`groups`, (N,) labels; one group by default) stop together, once every tip of the group
         is within `tolerance` (m) or `iterations` are spent: many independent batches are solved in one call, each
-        row's steps the same as in a call of its group alone."""
+        row's steps the same as in a call of its group alone. A row's tip and Jacobian come from its last
+        evaluation when it has not moved since (each row's kinematics is the same in any batch)."""
         q = np.clip(np.array(q0, dtype=float), lower, upper)
         eye = damping**2 * np.eye(3)
         label = np.zeros(len(q), int) if groups is None else np.unique(groups, return_inverse=True)[1].ravel()
-        active = np.arange(len(q))
+        tips, jacobians = np.empty((len(q), 3)), np.empty((len(q), 3, self.dof))
+        active = moved = np.arange(len(q))
         for _ in range(iterations):
-            tips, J = self.jacobians(q[active])
-            err = targets[active] - tips
+            tips[active], jacobians[active] = self.jacobians(q[active])
+            err = targets[active] - tips[active]
             worst = np.zeros(label.max(initial=0) + 1)
             np.maximum.at(worst, label[active], np.einsum("ij,ij->i", err, err))
             moving = worst[label[active]] >= tolerance**2
+            moved = active[:0]
             if not moving.any():
                 break
-            active, J, err = active[moving], J[moving], err[moving]
+            active, err = active[moving], err[moving]
+            J = jacobians[active]
             step = np.linalg.solve(J @ J.transpose(0, 2, 1) + eye, err[:, :, None])
             q[active] = np.clip(q[active] + (J.transpose(0, 2, 1) @ step)[:, :, 0], lower, upper)
-        return q, np.linalg.norm(targets - self.tip_positions(q), axis=1)
+            moved = active
+        if len(moved):
+            tips[moved], jacobians[moved] = self.jacobians(q[moved])
+        return q, np.linalg.norm(targets - tips, axis=1), jacobians
 
     def shape_poses(self, q: np.ndarray) -> np.ndarray:
         """(N, s, 4, 4) poses of the finger's shapes in the hand frame."""
