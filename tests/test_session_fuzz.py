@@ -73,7 +73,8 @@ def _number(m: dict, rng: random.Random, names: list[str]) -> str:
 
 def _path_name(m: dict, rng: random.Random, names: list[str]) -> str:
     """A name with a path where a file name is read (or any string), aimed at the files outside."""
-    named = [("robot_spec_name",), ("task", "object", "mesh"), *(("steps", i, "files", rng.randrange(2)) for i in range(len(m["steps"])))]
+    steps = m.get("steps") if isinstance(m.get("steps"), list) else []  # an earlier mutation may have removed or retyped them
+    named = [("robot_spec_name",), ("task", "object", "mesh"), *(("steps", i, "files", rng.randrange(2)) for i in range(len(steps)))]
     strings = [at for at in _nodes(m) if isinstance(_get(m, at), str)]
     at = rng.choice(named) if rng.random() < 0.7 else rng.choice(strings)
     value = rng.choice(names)

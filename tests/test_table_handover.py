@@ -8,7 +8,6 @@ sample re-checked by the independent oracle (tests/oracle.py).
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -134,20 +133,6 @@ def moved_through_a_placement(session, m) -> tuple[np.ndarray, np.ndarray]:
 def held_spans(m) -> list[int]:
     """The holder of each span of samples where it stays the same (-1: the object at rest)."""
     return [int(h) for k, h in enumerate(m.holder) if k == 0 or h != m.holder[k - 1]]
-
-
-@pytest.mark.slow
-def test_the_table_can_be_forced_on_the_default_task(tmp_path):
-    """`--set motion.strategy=table`: the statuette, which two hands can exchange in the air, goes through the table."""
-    shutil.copytree(EXAMPLE, tmp_path / "example")
-    session = Session.open(tmp_path / "example")
-    if "motion" in session.finished():
-        session = session.branch(tmp_path / "branch", "motion")
-    run_pipeline(session, params={"motion": {"strategy": "table"}})
-    m = session.result("motion")
-    assert not m.failure and m.strategy == "table" and not m.alternatives  # the handover was not tried
-    first, second = moved_through_a_placement(session, m)
-    assert m.holder[first[0]] != m.holder[second[0]]
 
 
 def _motion(phases: list[int], names: tuple, **extra) -> Motion:

@@ -98,6 +98,7 @@ def test_replaying_the_example_recomputes_nothing(tmp_path: Path, monkeypatch: p
     wb = Workbench(None, "127.0.0.1", _free_port(), session=folder, sessions_dir=tmp_path)
     try:
         assert wb.collision_ready.wait(120), "the workbench's own collision model (its live collision display) never came"
+        assert wb.task_editor.live.idle.wait(120), "the task's live check (the Task tab's verdict) never ended"
         calls: list[str] = []
         for target in EXPENSIVE:
             _count_everywhere(monkeypatch, target, calls)

@@ -110,7 +110,9 @@ def test_a_decimated_view_first_and_more_on_request(workbench: Workbench, page: 
     first = layer.moves_drawn()
     assert len(first) == MOVE_BUDGET and len(np.unique(first)) == len(first)
     edge = wrist_segments(roadmap)[2]
-    assert len(np.unique(roadmap.node_component[roadmap.edges[edge[first], 0]])) > 1, "one component only"
+    with_moves = np.unique(roadmap.node_component[roadmap.edges[edge, 0]])
+    drawn = np.unique(roadmap.node_component[roadmap.edges[edge[first], 0]])
+    assert len(with_moves) == 1 or len(drawn) > 1, "one component only"
     _tab(page, "Steps")
     page.get_by_text(f"Drawn: {MOVE_BUDGET} of {total} wrist moves").wait_for(timeout=10_000)
     try:
