@@ -215,26 +215,41 @@ def test_lazy_transit_goes_around_the_object(example):
     shape = coal_mesh(scene.object_mesh)
     big = int(np.bincount(roadmap.node_component).argmax())
     nodes = np.flatnonzero(roadmap.node_component == big)
-    far = np.argmax(np.linalg.norm(roadmap.wrists[nodes, 0] - roadmap.wrists[nodes[0], 0], axis=1))
-    q_start, q_goal = scene.q_initial, roadmap.node_q[nodes[far]]
+    from planner.motion.transit import TransitFailed
+
+    far = np.argsort(-np.linalg.norm(roadmap.wrists[nodes, 0] - roadmap.wrists[nodes[0], 0], axis=1), kind="stable")
+    q_start = scene.q_initial
     space = JointSpace.of(robot.lower, robot.upper, idx, q_start)
     free = make_validity(situation_model(cm, shape, Situation(None, np.diag([1.0, 1, 1, 1]) @ _far()), (), idx), profile, "moving")
-    first = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TRANSIT, np.random.default_rng(0),
-                        TransitStats()).query(q_start, q_goal)
-    # the object where the first path's wrist passes, half way along
-    mid = first[len(first) // 2]
     import pinocchio as pin
     data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, mid)
-    wrist = data.oMf[robot.frame_id(robot.spec.arm(robot.spec.arm_names[0]).hand.mount_frame)].translation
-    pose = np.eye(4)
-    pose[:3, 3] = wrist - np.asarray(scene.object_mesh.center_mass)
-    situation = Situation(None, pose)
-    blocked = make_validity(situation_model(cm, shape, situation, (), idx), profile, "moving")
-    assert not blocked.state_valid(mid), "the object must block the first path"
-    stats = TransitStats()
-    path = LazyTransit(MotionGraph(roadmap), space, blocked.on("changed"), blocked, blocked, TRANSIT, np.random.default_rng(0),
-                       stats).query(q_start, q_goal)
+
+    def around(q_goal: np.ndarray):
+        """(first path, the object's pose where its wrist passes half way, the configuration there, the path around
+        it and its stats), None when either query finds no path."""
+        try:
+            first = LazyTransit(MotionGraph(roadmap), space, free.on("changed"), free, free, TRANSIT, np.random.default_rng(0),
+                                TransitStats()).query(q_start, q_goal)
+            mid = first[len(first) // 2]
+            pin.framesForwardKinematics(robot.model, data, mid)
+            wrist = data.oMf[robot.frame_id(robot.spec.arm(robot.spec.arm_names[0]).hand.mount_frame)].translation
+            pose = np.eye(4)
+            pose[:3, 3] = wrist - np.asarray(scene.object_mesh.center_mass)
+            blocked = make_validity(situation_model(cm, shape, Situation(None, pose), (), idx), profile, "moving")
+            if blocked.state_valid(mid):
+                return None  # the object must block the first path
+            stats = TransitStats()
+            path = LazyTransit(MotionGraph(roadmap), space, blocked.on("changed"), blocked, blocked, TRANSIT,
+                               np.random.default_rng(0), stats).query(q_start, q_goal)
+            return pose, mid, blocked, path, stats
+        except TransitFailed:
+            return None
+
+    # the wrist's farthest node of the largest component that the start joins and whose path can go around the object
+    found = next((r for r in (around(roadmap.node_q[nodes[k]]) for k in far[:10]) if r is not None), None)
+    assert found is not None, "no far node of the largest component is joined around the object"
+    pose, mid, blocked, path, stats = found
+    q_goal = path[-1]
     assert stats.searches > 1, "the first path must have been rejected and the graph searched again"
     assert not np.any(np.all(np.isclose(path, mid), axis=1)), "the blocked configuration is not on the new path"
     assert np.allclose(path[0], q_start) and np.allclose(path[-1], q_goal)
@@ -273,7 +288,9 @@ def test_rrt_reconnects_what_the_graph_cannot(example):
     validity = make_validity(situation_model(cm, coal_mesh(scene.object_mesh), Situation(None, _far()), (), idx),
                              transit_profile(roadmap.resolution, 0.02, 0.008), "moving")
     q_start = scene.q_initial
-    q_goal = roadmap.node_q[int(np.argmax(space.distance(roadmap.node_q, q_start)))]
+    far = np.argsort(-space.distance(roadmap.node_q, q_start), kind="stable")[:200]
+    # the farthest node the straight motion from the start cannot reach (the direct join is tried first)
+    q_goal = roadmap.node_q[next(int(k) for k in far if not validity.motion_valid(q_start, roadmap.node_q[k]))]
     graph, stats = MotionGraph(cut), TransitStats()
     edges_before = len(graph.edges)
     narrow = dataclasses.replace(TRANSIT, max_connections=8)
