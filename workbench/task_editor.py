@@ -290,9 +290,11 @@ class TaskEditor:
     # -- showing and checking ----------------------------------------------------------------------
 
     def _apply(self, scene: Scene) -> None:
-        """The live check's thread, once the edits pause: the workbench shows the edited task (unless it already does)."""
+        """The live check's thread, once the edits pause: the workbench shows the edited task (unless it already does). A
+        task only shown (loaded, replayed, a run's session) is never applied: the workbench may already show another
+        object of the same task, and applying the older one would replace its session."""
         with self._lock:
-            if scene is not self._scene or scene is self.wb.scene or self.wb.session_panel.busy():
+            if not self.edited or scene is not self._scene or scene is self.wb.scene or self.wb.session_panel.busy():
                 return
             self._applying = scene
         self.wb.replace_task(scene)  # the person was asked about unsaved steps when the edit was made
