@@ -30,6 +30,7 @@ from workbench.layers.phases import PHASE_COLORS
 from workbench.layers.placements import BOTH_COLOR, NONE_COLOR, reach_colors
 
 DESK_TOP = 0.72  # m: the default desk's top surface (assets/tasks/default.toml)
+SHARED_ROADMAP = {"roadmap": {"task_nodes": 0}}  # the desk's roadmap without the task's sites, built once for every task
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
 
 
@@ -87,7 +88,7 @@ def test_the_placements_step_is_recorded_and_drawn(tmp_path, cube_scene):
 def test_a_cube_is_handed_over_through_the_table(tmp_path):
     scene = load_task(cube_task(tmp_path))
     session = Session.create(tmp_path / "session", scene, 0)
-    run_pipeline(session)
+    run_pipeline(session, params=SHARED_ROADMAP)
     m = session.result("motion")
     assert not m.failure and m.strategy == "table"
     rejected = {a["strategy"]: a["failure"] for a in m.alternatives}
@@ -101,7 +102,7 @@ def test_a_cube_is_handed_over_through_the_table(tmp_path):
     # forced to hand over in the air, the motion fails naming the stage that removed every double grasp
     branch = session.branch(tmp_path / "handover", "motion")
     with pytest.raises(StepFailed, match="handover strategy: double grasps: no compatible pair"):
-        run_pipeline(branch, params={"motion": {"strategy": "handover"}})
+        run_pipeline(branch, params={**SHARED_ROADMAP, "motion": {"strategy": "handover"}})
 
 
 def moved_through_a_placement(session, m) -> tuple[np.ndarray, np.ndarray]:
