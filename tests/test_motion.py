@@ -64,11 +64,14 @@ def either(request):
 
 
 def test_the_default_task_hands_over_in_the_air(planned):
-    """Where a double grasp works, the handover is the cheapest sequence: the motion is the paper's, and says why the
-    other strategies were not taken."""
+    """Where a double grasp works, the handover (tried first) moves: the motion is the paper's, no configuration at an
+    intermediate placement was made, and the motion says why the other strategies were not taken."""
     _, m = planned
     assert m.strategy == "handover" and not m.intermediate
-    assert {a["strategy"] for a in m.alternatives} == {"table", "regrasp"}, m.alternatives
+    rejected = {a["strategy"]: a["failure"] for a in m.alternatives}
+    assert set(rejected) == {"table", "regrasp"} and rejected["table"].startswith("not tried: the handover moved"), rejected
+    graph = next(s for s in m.stages if s["stage"] == "regrasp graph")
+    assert graph["count"] == 0 and "0 of 0 configurations" in graph["note"], graph
     assert tuple(m.phase_names) == ("Grasp", "Carry", "Place", "Rest")
 
 

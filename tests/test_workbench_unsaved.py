@@ -66,6 +66,7 @@ def test_switching_the_task_after_running_a_step_asks_and_keeps_the_work(bench: 
     assert bench.session is None
     panel = bench.session_panel
     assert panel.step.value == NO_STEP and "pending" in panel.table.content and "done" not in panel.table.content
+    assert _wait_for(lambda: panel.message.visible, 10), "the kept steps were not said"  # said once the scratch is gone
     message = html.unescape(panel.message.content)
     assert panel.message.visible and "Unsaved work kept" in message and "Nothing to run" not in message, message
     _tab(page, "Steps")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,7 @@ from .task_tab import TaskTab
 from .view import CAMERA_LOOK_AT, CAMERA_POSITION, close_up, move_cameras, setup_view
 
 MAX_LISTED_PAIRS = 8
+SIGNAL_POLL = 0.25  # s: the longest a SIGTERM or Ctrl-C waits before the server starts stopping
 VIEWS = ("overview", "start", "handover", "goal")  # camera buttons: the scene, the object at its start, the exchange, its goal
 GRASP_CLOSE_UP = 0.6  # m from the object when a grasp is chosen
 
@@ -369,7 +371,8 @@ def run(task: str | Path | None = None, host: str = "127.0.0.1", port: int = 808
     print(f"regrasp workbench: open {workbench.url} (Ctrl-C stops it)", file=sys.stderr, flush=True)
     try:
         with sigterm_unwinds():  # SIGTERM ends the server like Ctrl-C: the workers of a running step are killed too
-            workbench.server.sleep_forever()
+            while True:  # short sleeps: a signal the kernel hands to another thread is handled when the main thread's
+                time.sleep(SIGNAL_POLL)  # sleep ends (viser's sleep_forever sleeps an hour at a time)
     except KeyboardInterrupt:
         pass
     finally:

@@ -4,9 +4,10 @@ until one moves.
 Handover: a double grasp (double_grasp.py: the paper's plan, or a direct transfer). Table: the picking hand sets the
 object down at an intermediate placement and the placing hand takes it there; regrasp: one arm picks and places,
 setting the object down on the way and taking it again in another grasp (both table_handover.py). The `strategy`
-parameter says which the graph may use (auto: all three). Each sequence tried and failed says why; a strategy with
-none tried says the stage that removed it: ruled out before the search (no double grasp, no placement, the arms),
-no sequence in the graph (the configurations at the placements), or dearer than the one that moved.
+parameter says which the graph may use (auto: all three, the handover first: the table and the regrasp are searched,
+cheapest first, only when no double grasp moves). Each sequence tried and failed says why; a strategy with none tried
+says the stage that removed it: ruled out before the search (no double grasp, no placement, the arms), no sequence in
+the graph (the configurations at the placements), not tried (the handover moved), or dearer than the one that moved.
 """
 from __future__ import annotations
 
@@ -159,18 +160,15 @@ def plan_sequences(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: G
         return True
 
     turn = 0.0  # the estimate at which the strategy that moved had its turn
-    for seq in search.sequences():
+    if HANDOVER in allowed and HANDOVER not in removed:  # the paper's plan first: the others only when it fails
+        if not any(attempt(Sequence.of(costs, scene.q_initial, graph.handover_edges(k))) for k in range(min(len(dg), budget[HANDOVER]))):
+            done.add(HANDOVER)
+    for seq in search.sequences() if chosen is None else ():
         popped += 1
         name, turn = seq.strategy, seq.seconds
         if all(s in done or len(tried[s]) >= budget[s] for s in allowed if s not in removed):
             break
         if name in done or len(tried[name]) >= budget[name] or skips.skip(seq):
-            continue
-        if name == HANDOVER:  # its turn comes at its cheapest estimate; then every double grasp in the paper's order
-            block = [Sequence.of(costs, scene.q_initial, graph.handover_edges(k)) for k in range(min(len(dg), budget[name]))]
-            if any(attempt(s) for s in block):
-                break
-            done.add(name)
             continue
         if attempt(seq):
             break
@@ -190,6 +188,8 @@ def plan_sequences(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: G
         elif tried[name]:
             why = f"motion: no valid motion for any of the {len(tried[name])} sequences tried: " + "; ".join(
                 f"{i + 1}: {w}" for i, w in enumerate(tried[name]))
+        elif chosen is not None and chosen.strategy == HANDOVER:
+            why = "not tried: the handover moved (it is tried first; the others only when it fails)"
         elif chosen is not None:
             why = f"dearer: none estimated below {turn:.1f} s, where the {chosen.strategy} strategy's turn came"
         else:
