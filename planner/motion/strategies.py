@@ -174,9 +174,10 @@ def plan_sequences(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: G
             break
     made = graph.made if graph else {}
     dropped = "; ".join(f"{n} {why}" for why, n in sorted(search.dropped.items()))
-    out.stages = [{"stage": "regrasp graph", "count": popped, "note": f"sequences popped, cheapest first; {search.expanded} nodes "
-                   f"expanded, {sum(v is not None for v in made.values())} of {len(made)} configurations at intermediate "
-                   f"placements found" + (f"; dropped: {dropped}" if dropped else "")},
+    searched = (f"sequences popped, cheapest first; {search.expanded} nodes expanded, {sum(v is not None for v in made.values())}"
+                f" of {len(made)} configurations at intermediate placements found" + (f"; dropped: {dropped}" if dropped else ""))
+    out.stages = [{"stage": "regrasp graph", "count": popped,
+                   "note": "not searched: the handover moved" if chosen is not None and not popped else searched},
                   {"stage": "sequences planned", "count": len(out.tried),
                    "note": ", ".join(f"{len(tried[s]) + (s == out.strategy)} {s}" for s in allowed if s not in removed) or "none"}]
     out.seconds = [time.perf_counter() - started - planning, planning]
