@@ -269,3 +269,18 @@ def motion_collisions(session, m) -> list[tuple]:
             if found:
                 bad.append((k, round(float(s), 1), found[:3]))
     return bad
+
+
+def grasp_offset(session, m) -> float:
+    """The farthest (m) a holding palm sits, over every held sample, from the nearest grasp of its hand's lists (the
+    pick and place steps'): a hand holding the object elsewhere than its list says puts a fingertip that much deeper."""
+    robot, lists = session.scene.robot, [session.result(name) for name in ("pick_grasps", "place_grasps")]
+    model = robot.model
+    data, worst = model.createData(), 0.0
+    for k in np.flatnonzero(m.holder >= 0):
+        arm = m.arms[int(m.holder[k])]
+        pin.framesForwardKinematics(model, data, m.q[k])
+        palm = np.linalg.solve(m.object_pose[k], data.oMf[model.getFrameId(robot.palm_frame(arm))].homogeneous)
+        listed = np.concatenate([g.hand_pose[:, :3, 3] for g in lists if g.hand == arm])
+        worst = max(worst, float(np.linalg.norm(listed - palm[:3, 3], axis=1).min()))
+    return worst

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from generated_objects import TASK_TEXT_ROBOT
-from oracle import Oracle, motion_collisions
+from oracle import Oracle, grasp_offset, motion_collisions
 
 from planner.core.runner import run_pipeline
 from planner.core.session import Session
@@ -165,6 +165,13 @@ def test_every_configuration_is_collision_free_by_an_independent_oracle(either):
     session, m = either
     bad = motion_collisions(session, m)
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
+
+
+def test_every_hand_holds_the_object_at_a_listed_grasp(either):
+    """To 0.2 mm: the grasp configurations hold their grasps to 2 mm, so the motion refines them (a thumb 1.7 mm into a
+    cube before it did)."""
+    session, m = either
+    assert grasp_offset(session, m) < 2e-4
 
 
 def test_oracle_catches_a_collision(planned):

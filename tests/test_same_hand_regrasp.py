@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_table_handover import SHARED_ROADMAP, cube_task, moved_through_a_placement
+from test_table_handover import CUBE_PARAMS, cube_task, moved_through_a_placement
 
 from planner.core.runner import run_pipeline
 from planner.core.session import Session
@@ -34,7 +34,7 @@ def right_side_task(folder: Path) -> Path:
 def test_one_arm_sets_the_cube_down_and_takes_it_again_in_another_grasp(tmp_path):
     scene = load_task(right_side_task(tmp_path))
     session = Session.create(tmp_path / "session", scene, 0)
-    run_pipeline(session, params={**SHARED_ROADMAP, "motion": {"strategy": "regrasp"}})
+    run_pipeline(session, params={**CUBE_PARAMS, "motion": {"strategy": "regrasp"}})
     arms = session.result("arms")
     assert arms.picking_arm == arms.placing_arm == "right" and not arms.handover
     m = session.result("motion")

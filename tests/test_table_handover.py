@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from generated_objects import TASK_TEXT_ROBOT
-from oracle import Oracle, motion_collisions
+from oracle import Oracle, grasp_offset, motion_collisions
 
 from planner.core.results import load_result, save_result
 from planner.core.runner import run_pipeline, run_step
@@ -30,7 +30,9 @@ from workbench.layers.phases import PHASE_COLORS
 from workbench.layers.placements import BOTH_COLOR, NONE_COLOR, reach_colors
 
 DESK_TOP = 0.72  # m: the default desk's top surface (assets/tasks/default.toml)
+CUBE_GRASPS = {"positions": 40, "orientations": 60}  # 4,860 frames: a cube's hundreds of grasps, 6 s a hand instead of 36
 SHARED_ROADMAP = {"roadmap": {"task_nodes": 0}}  # the desk's roadmap without the task's sites, built once for every task
+CUBE_PARAMS = {**SHARED_ROADMAP, "pick_grasps": CUBE_GRASPS, "place_grasps": CUBE_GRASPS}
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
 
 
@@ -88,7 +90,7 @@ def test_the_placements_step_is_recorded_and_drawn(tmp_path, cube_scene):
 def test_a_cube_is_handed_over_through_the_table(tmp_path):
     scene = load_task(cube_task(tmp_path))
     session = Session.create(tmp_path / "session", scene, 0)
-    run_pipeline(session, params=SHARED_ROADMAP)
+    run_pipeline(session, params=CUBE_PARAMS)
     m = session.result("motion")
     assert not m.failure and m.strategy == "table"
     rejected = {a["strategy"]: a["failure"] for a in m.alternatives}
@@ -102,7 +104,7 @@ def test_a_cube_is_handed_over_through_the_table(tmp_path):
     # forced to hand over in the air, the motion fails naming the stage that removed every double grasp
     branch = session.branch(tmp_path / "handover", "motion")
     with pytest.raises(StepFailed, match="handover strategy: double grasps: no compatible pair"):
-        run_pipeline(branch, params={**SHARED_ROADMAP, "motion": {"strategy": "handover"}})
+        run_pipeline(branch, params={**CUBE_PARAMS, "motion": {"strategy": "handover"}})
 
 
 def moved_through_a_placement(session, m) -> tuple[np.ndarray, np.ndarray]:
@@ -128,6 +130,7 @@ def moved_through_a_placement(session, m) -> tuple[np.ndarray, np.ndarray]:
     assert np.allclose(m.object_pose[-1], scene.object_final, atol=1e-4)
     bad = motion_collisions(session, m)
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
+    assert grasp_offset(session, m) < 2e-4, "a hand holds the object away from its listed grasp"
     return first, second
 
 

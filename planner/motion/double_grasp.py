@@ -169,16 +169,16 @@ class DoubleGraspPlanner:
         scene, c, arms, hand, cm = self.scene, self.contact, self.arms, self.hand, self.validities.cm
         oi, of = scene.object_initial, scene.object_final
 
-        # exact grasps, so the object's pose is continuous where it changes hands: each hand holds it as its grasp and place
-        # configurations do (within their IK tolerance of the listed grasp), and the exchange, in the air where both
-        # arms have room, is refined to join them (a placement at the edge of the workspace, the torso at its limits,
-        # cannot move its palm by the millimetres); a direct transfer: one hand holds it from the grasp to the placement
+        # exact grasps, so the object's pose is continuous where it changes hands and each hand holds it as its list
+        # does (the double grasps' configurations hold their grasps to 2 mm, which puts a fingertip that much deeper):
+        # the grasp and place configurations are refined to the listed grasps, and the exchange, in the air where both
+        # arms have room, to join them; a direct transfer: one hand holds it from the grasp to the placement
         direct = a.arm == b.arm
+        q_grasp = arms.refine(q_grasp, a.arm, oi @ a.palm_in_object, None, GRASP, "grasp")
         g_a = np.linalg.inv(oi) @ arms.palm(q_grasp, a.arm)
-        if direct:
-            g_b = g_a
-            q_place = arms.refine(q_place, b.arm, of @ g_b, None, PLACE, "place")
-        else:
+        g_b = g_a if direct else b.palm_in_object
+        q_place = arms.refine(q_place, b.arm, of @ g_b, None, PLACE, "place")
+        if not direct:
             g_b = np.linalg.inv(of) @ arms.palm(q_place, b.arm)
             x = arms.palm(q_exch, a.arm) @ np.linalg.inv(g_a)
             q_exch = arms.refine(q_exch, b.arm, x @ g_b, a.arm, CARRY, "exchange")

@@ -30,11 +30,12 @@ def plan_table(planner: DoubleGraspPlanner, q_grasp: np.ndarray, q_set: np.ndarr
     oi, of = scene.object_initial, scene.object_final
     idx = scene.robot.hand_idx
 
-    # exact grasps, so the object's pose is continuous: the picking hand sets it down exactly at the placement as it
-    # holds it; the placing hand takes it exactly at its listed grasp (its configuration there is within the IK
-    # tolerance of it, its fingers closing on the object as the list has them), and places it as it took it; each hand
-    # open until it approaches, then keeping its fingers as they let go until the end
+    # exact grasps, so the object's pose is continuous: the picking hand holds it at its listed grasp and sets it down
+    # exactly at the placement as it holds it; the placing hand takes it exactly at its listed grasp (its fingers
+    # closing on the object as the list has them), and places it as it took it; each hand open until it approaches,
+    # then keeping its fingers as they let go until the end
     same = a.arm == b.arm
+    q_grasp = arms.refine(q_grasp, a.arm, oi @ a.palm_in_object, None, GRASP, "grasp")
     g_a = np.linalg.inv(oi) @ arms.palm(q_grasp, a.arm)
     q_set = hand.set(q_set, a.arm, a.fingers) if same else hand.set(hand.set(q_set, a.arm, a.fingers), b.arm, hand.open[idx[b.arm]])
     q_set = arms.refine(q_set, a.arm, pose @ g_a, None, SET_DOWN, "set-down")
