@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_table_handover import CUBE_PARAMS, cube_task, moved_through_a_placement
+from test_table_handover import CUBE_PARAMS, moved_through_a_placement, small_object_task
 
 from planner.core.runner import run_pipeline
 from planner.core.session import Session
@@ -21,7 +21,7 @@ RIGHT_ONLY = ("{ xyz = [0.45, -0.80, 0.72], rpy = [0.0, 0.0, 0.3] }", "{ xyz = [
 
 def right_side_task(folder: Path) -> Path:
     """The cube task with both placements on the right, where the right arm reaches both: it picks and places."""
-    task = cube_task(folder)
+    task = small_object_task(folder)
     text = task.read_text()
     text = text.replace("initial = { xyz = [0.45, -0.85, 0.72], rpy = [0.0, 0.0, 1.2] }", f"initial = {RIGHT_ONLY[0]}")
     text = text.replace("final = { xyz = [0.50, 0.85, 0.72], rpy = [0.0, 0.0, 2.7] }", f"final = {RIGHT_ONLY[1]}")

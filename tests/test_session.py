@@ -220,6 +220,22 @@ def test_unknown_step_in_manifest(example):
     assert "steps[0].name" in msg and "teleport" in msg
 
 
+def test_a_session_saved_before_the_placements_step_opens(example):
+    """Sessions written before the motion needed the placements step (it had none) open with their motion; a step
+    that needs one listed before it is still refused."""
+    manifest = json.loads((example / MANIFEST).read_text())
+    record = next(r for r in manifest["steps"] if r["name"] == "placements")
+    manifest["steps"].remove(record)
+    for name in record["files"]:
+        (example / name).unlink()
+    (example / MANIFEST).write_text(json.dumps(manifest))
+    session = Session.open(example)
+    assert "placements" not in session.finished() and session.result("motion").duration > 0
+    manifest["steps"] = [r for r in manifest["steps"] if r["name"] != "roadmap"]
+    (example / MANIFEST).write_text(json.dumps(manifest))
+    assert "needs 'roadmap'" in _open_error(example)
+
+
 def test_branch_keeps_the_original(example, tmp_path):
     folder = example
     before = {p.name: p.read_bytes() for p in folder.iterdir()}

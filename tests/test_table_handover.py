@@ -1,5 +1,5 @@
-"""The table handover (issue 36): a 5 cm cube on the default desk leaves no pair of grasps that keeps the two Allegro
-hands apart, so the right hand sets it down where the left takes it.
+"""The table handover (issue 36): a 5 cm cube or a 4.5 cm x 9 cm can on the default desk leaves no pair of grasps that
+keeps the two Allegro hands apart, so the right hand sets it down where the left takes it.
 
 The placements are checked with the oracle's own geometry (python-fcl on the obstacles' shapes) and the mesh's
 vertices; the motion end to end: the object held by one hand, then at rest on the desk, then held by the other, every
@@ -19,7 +19,7 @@ from planner.core.results import load_result, save_result
 from planner.core.runner import run_pipeline, run_step
 from planner.core.session import Session
 from planner.core.steps import StepFailed
-from planner.model.shapes import box, obj_text, on_desk
+from planner.model.shapes import box, cylinder, obj_text, on_desk
 from planner.model.task import load_task
 from planner.motion.result import PHASES, TABLE_PHASES, Motion
 from planner.pipeline import step_named
@@ -36,18 +36,21 @@ CUBE_PARAMS = {**SHARED_ROADMAP, "pick_grasps": CUBE_GRASPS, "place_grasps": CUB
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
 
 
-def cube_task(folder: Path) -> Path:
-    """The default task with a 5 cm cube instead of the statuette."""
-    mesh = folder / "cube.obj"
-    mesh.write_text(obj_text(on_desk(box((0.05, 0.05, 0.05)))))
-    task = folder / "cube.toml"
+SMALL_OBJECTS = {"cube": lambda: box((0.05, 0.05, 0.05)), "can": lambda: cylinder(0.0225, 0.09)}  # 5 cm; 4.5 x 9 cm
+
+
+def small_object_task(folder: Path, name: str = "cube") -> Path:
+    """The default task with a small object (a 5 cm cube, or a 4.5 cm x 9 cm can) instead of the statuette."""
+    mesh = folder / f"{name}.obj"
+    mesh.write_text(obj_text(on_desk(SMALL_OBJECTS[name]())))
+    task = folder / f"{name}.toml"
     task.write_text(TASK_TEXT_ROBOT.replace('mesh = "statuette"', f'mesh = "{mesh}"'))
     return task
 
 
 @pytest.fixture(scope="module")
 def cube_scene(tmp_path_factory):
-    return load_task(cube_task(tmp_path_factory.mktemp("cube")))
+    return load_task(small_object_task(tmp_path_factory.mktemp("cube")))
 
 
 @pytest.mark.slow
@@ -87,8 +90,9 @@ def test_the_placements_step_is_recorded_and_drawn(tmp_path, cube_scene):
 
 
 @pytest.mark.slow
-def test_a_cube_is_handed_over_through_the_table(tmp_path):
-    scene = load_task(cube_task(tmp_path))
+@pytest.mark.parametrize("name", sorted(SMALL_OBJECTS))
+def test_a_small_object_is_handed_over_through_the_table(tmp_path, name):
+    scene = load_task(small_object_task(tmp_path, name))
     session = Session.create(tmp_path / "session", scene, 0)
     run_pipeline(session, params=CUBE_PARAMS)
     m = session.result("motion")

@@ -50,6 +50,9 @@ MESHES = "task_meshes.npz"
 STEP_KEYS = ("name", "params", "seed", "seconds", "stats", "files")
 OPTIONAL_STEP_KEYS = ("stage_seconds", "cached")
 MANIFEST_KEYS = ("format_version", "task", "robot_spec", "robot_spec_name", "seed", "versions", "steps")
+# (step, need) pairs added after sessions were saved without the need: such a session still opens (its step's result
+# was made without it); running the step again runs the need first
+ADDED_NEEDS = {("motion", "placements")}
 MAX_SPEC_CHARS = 1_000_000
 MAX_KEY_CHARS = 1000  # an embedded mesh's key: the task's mesh value, its scale and up axis
 
@@ -177,7 +180,7 @@ def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
         _fail(path, f"{field}.name", f"step '{name}' is listed after '{done[-1]}': steps must be in pipeline order ({', '.join(order)})")
     step = step_named(name)
     for need in step.needs:
-        if need not in done:
+        if need not in done and (name, need) not in ADDED_NEEDS:
             _fail(path, f"{field}.name", f"step '{name}' needs '{need}', which is not listed before it")
     params = typed(record["params"], dict, path, f"{field}.params", "an object of parameters")
     _finite_params(params, path, f"{field}.params")  # first: it names the parameter's own field
