@@ -51,12 +51,11 @@ def test_the_example_motion_keeps_the_hands_out_of_the_object(example):
     assert not bad, f"{len(bad)} colliding samples, first: {bad[:3]}"
 
 
-def test_a_finger_closed_further_into_the_object_is_found(example):
-    """The holding finger's distal joint turned on (the way it closed) until its fingertip has moved 5 mm."""
+def _closed_further(example, q0: np.ndarray, holder: str, tip: int) -> np.ndarray:
+    """q0 with the distal joint of `tip`'s finger turned on (the way it closed) until the fingertip has moved DEEPER."""
     session, m, oracle = example
     robot = session.scene.robot
-    k, holder, tip = _held(example)
-    q = m.q[k].copy()
+    q = q0.copy()
     joint = robot.model.joints[oracle.gm.geometryObjects[tip].parentJoint].idx_q
     hand = robot.spec.arm(holder).hand
     finger = next(f for f in hand.fingers if robot.model.frames[robot.frame_id(hand.prefixed(f.tip_frame))].parentJoint
@@ -64,11 +63,33 @@ def test_a_finger_closed_further_into_the_object_is_found(example):
     closing = np.sign(q[joint] - finger.open[-1]) or 1.0
     start = oracle._posed(q)[0][tip][:3, 3]
     for turn in np.linspace(0.0, 0.5, 501):
-        q[joint] = m.q[k][joint] + closing * turn
+        q[joint] = q0[joint] + closing * turn
         if np.linalg.norm(oracle._posed(q)[0][tip][:3, 3] - start) >= DEEPER:
             break
-    assert not oracle.collisions(m.q[k], m.object_pose[k], holder, None, False)
-    found = oracle.collisions(q, m.object_pose[k], holder, None, False)
+    return q
+
+
+def test_a_finger_closed_further_into_the_object_is_found(example):
+    """A touching finger of the holding hand closed on (its distal joint turned the way it closed until the fingertip
+    has moved 5 mm): the one whose fingertip then moves most against the surface's outward normal (a fingertip on the
+    surface may roll along it instead)."""
+    session, m, oracle = example
+    k, holder, _ = _held(example)
+    mesh, pose = session.scene.object_mesh, m.object_pose[k]
+    poses = oracle._posed(m.q[k])[0]
+
+    def inward(tip: int) -> float:
+        start = np.linalg.solve(pose, poses[tip])[:3, 3]
+        moved = np.linalg.solve(pose, oracle._posed(_closed_further(example, m.q[k], holder, tip))[0][tip])[:3, 3]
+        normal = mesh.vertex_normals[int(np.argmin(np.linalg.norm(mesh.vertices - start, axis=1)))]
+        return float(-(moved - start) @ normal)
+
+    touching = [g for g in oracle.tips[holder] if oracle.depth_in_object(g, poses[g], pose) > -5e-4]
+    tip = max(touching, key=inward)
+    assert inward(tip) > DEEPER / 2, "no touching finger closes into the object"
+    q = _closed_further(example, m.q[k], holder, tip)
+    assert not oracle.collisions(m.q[k], pose, holder, None, False)
+    found = oracle.collisions(q, pose, holder, None, False)
     assert any("into the object" in f for f in found), found
 
 

@@ -53,8 +53,8 @@ class MotionParams:
     contact_env_clearance: float = bounded(0.004, 0.0, 0.05, "m", "... and this far between checks")
     contact_penetration: float = bounded(0.001, 1e-5, 0.01, "m", "hand-object pairs touch at most this deep between checks (0 at them)")
     contact_coarse: int = bounded(3, 1, 100, "(factor)", "contact checks at every k-th configuration with k-times margins first (1: dense)")
-    strategy: str = described("auto", "handover: double grasp; table: set down for the other hand; regrasp: retaken by the same "
-                              "hand; auto: the handover, else the cheaper of the others", tuple(STRATEGIES))
+    strategy: str = described("auto", "handover: in the air; table: set down for the other hand; regrasp: retaken by the same "
+                              "hand; auto: handover first", tuple(STRATEGIES))
     contact_seconds: float = bounded(1.0, 0.0, 60.0, "s", "regrasp graph: each contact motion's estimated time (transits: joint "
                                      "distance over max_velocity)")
     regrasp_grasps: int = bounded(8, 1, 1000, "grasps", "table, regrasp: each hand's grasps tried at a placement, best scored first")
