@@ -48,12 +48,14 @@ def planned(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def direct(tmp_path_factory):
-    """The whole pipeline on the one-arm task, with the session tests' seed (grasp lists and roadmap from the test cache)."""
+    """The whole pipeline on the one-arm task, with the session tests' seed (grasp lists from the test cache) and the
+    desk's roadmap without the task's sites (those of another task cost a build of their own; test_task_roadmap.py
+    tests them)."""
     folder = tmp_path_factory.mktemp("direct")
     task = folder / "near.toml"
     task.write_text(TASK_TEXT_ROBOT.replace("initial = { xyz = [0.45, -0.85, 0.72]", "initial = { xyz = [0.45, -0.78, 0.72]"))
     session = Session.create(folder / "session", load_task(task), 3)
-    run_pipeline(session)
+    run_pipeline(session, params={"roadmap": {"task_nodes": 0}})
     return session, session.result("motion")
 
 
