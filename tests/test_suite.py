@@ -234,7 +234,8 @@ def test_the_report_opens_in_chromium_and_shows_its_plots(local_run, suite_file,
     data = json.loads((local_run / "suite.json").read_text())
     failed = data["results"][1] | {"success": False, "failed_step": "grasp_configs", "failed_stage": "pick grasps with a configuration",
                                    "message": "no collision-free pick grasp"}
-    data |= {"results": [data["results"][0], failed, *data["results"][2:]], "by_stage": {"grasp_configs: pick grasps": 1}}
+    data |= {"results": [data["results"][0], failed, *data["results"][2:]], "by_stage": {"grasp_configs: pick grasps": 1},
+             "by_strategy": {"handover": 2, "table": 1}}
     spec = load_suite(suite_file)
     write_report(data, spec, load_task(spec.base_task).environment, tmp_path)
     page = browser.new_page(viewport={"width": 1200, "height": 900})
@@ -242,7 +243,9 @@ def test_the_report_opens_in_chromium_and_shows_its_plots(local_run, suite_file,
         for folder, failures in ((local_run, 0), (tmp_path, 1)):
             page.goto((folder / "report.html").as_uri())
             plots = page.locator("figure.plot svg")
-            assert plots.count() == 5 - (failures == 0)  # no failure: the failures plot says so instead
+            assert plots.count() == 4 + 2 * failures  # no failure, no strategy (no motion): those plots say so instead
+            strategies = page.locator("figure.strategies")
+            assert (strategies.locator("text", has_text="table handover").count() == 1) == bool(failures), strategies.inner_html()
             for i in range(plots.count()):
                 box = plots.nth(i).bounding_box()
                 assert box and box["width"] > 100 and box["height"] > 20

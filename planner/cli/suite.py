@@ -15,7 +15,7 @@ def _cmd_suite(args: argparse.Namespace) -> int:
     from planner.model.task import load_task
     from planner.suite.executors import LocalExecutor, RayExecutor
     from planner.suite.job import check_until
-    from planner.suite.report import write_report
+    from planner.suite.report import STRATEGY_NAMES, write_report
     from planner.suite.run import run_suite
     from planner.suite.spec import load_suite
 
@@ -32,6 +32,8 @@ def _cmd_suite(args: argparse.Namespace) -> int:
     data = run.data
     print(f"suite {spec.name}: {data['succeeded']} of {data['tasks']} tasks succeeded (success_rate {data['success_rate']:.3f}) "
           f"through {data['until']} in {data['wall_seconds']:.0f} s")
+    for key, count in data.get("by_strategy", {}).items():
+        print(f"  succeeded by {STRATEGY_NAMES.get(key, key)}: {count}")
     for key, count in data["by_stage"].items():
         print(f"  failed at {key}: {count}")
     print(f"wrote {out / 'suite.json'}, {out / 'suite.csv'} and {report}")

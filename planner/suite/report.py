@@ -28,6 +28,8 @@ tr.failed td { background: #fdf0f2; } code { font-size: 12px; } .figures span { 
 svg text { font: 11px system-ui, sans-serif; fill: #222; }
 """
 
+STRATEGY_NAMES = {"handover": "handover in the air", "table": "table handover", "regrasp": "same-hand regrasp"}  # the motion's
+
 
 def _margins(labels: Iterable[str], notes: Iterable[str]) -> tuple[int, int]:
     """(the width left of the bars, the width right of them) that fit the labels and the notes (6.5 px a character)."""
@@ -146,6 +148,7 @@ def report_html(data: dict[str, Any], spec: SuiteSpec, environment: Environment,
     results = data["results"]
     seconds = [(step, s["median"], s["p95"], f'{s["median"]:.2f} s (p95 {s["p95"]:.2f})') for step, s in data["seconds"].items()]
     failures = [(key, n, 0.0, str(n)) for key, n in data["by_stage"].items()]
+    strategies = [(STRATEGY_NAMES.get(key, key), n, 0.0, str(n)) for key, n in data.get("by_strategy", {}).items()]
     regions = {**{f"from {k}": v for k, v in data["by_initial_region"].items()},
                **{f"to {k}": v for k, v in data["by_final_region"].items()}}
     figures = (f'<span>tasks <b>{plain(data["finished"])}</b> of {plain(data["tasks"])}</span>'
@@ -160,6 +163,8 @@ def report_html(data: dict[str, Any], spec: SuiteSpec, environment: Environment,
 {_success_bars("Success per placement region", regions, "regions")}</div>
 <h2>Success per object</h2><div class="plots">{_success_bars("Success per object", data["by_object"], "objects")}</div>
 <p>{"; ".join(f"<b>{plain(o.name)}</b>: {plain(o.description)}" for o in spec.objects)}</p>
+<h2>How the tasks that succeeded moved the object</h2>
+<div class="plots">{_bars("Successes per strategy", strategies, cls="strategies")}</div>
 <h2>Failures and time</h2><div class="plots">{_bars("Failures per step and stage", failures, cls="failures")}
 {_bars("Seconds per step: median (bar) and p95 (mark)", seconds, cls="seconds")}</div>
 <h2>Tasks</h2><p>Each task's session is in <code>sessions/</code>; open one with the command beside it.</p>{_task_rows(results, folder)}
