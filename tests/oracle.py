@@ -137,6 +137,11 @@ class Oracle:
             centres.append(ob.pose[:3, :3] @ c + ob.pose[:3, 3])
             radii.append(r)
         self.env_centre, self.env_radius = np.array(centres), np.array(radii)
+        # a box obstacle's pose and half extents: a link's bounding sphere is near it only within its radius of the box
+        # (the desk's own bounding sphere holds the whole robot)
+        self.boxes = {e: (np.linalg.inv(ob.pose), np.asarray(ob.size, float) / 2) for e, ob in enumerate(scene.environment)
+                      if ob.shape == "box"}
+        self.env_objects = [fcl.CollisionObject(geom, _tf(T)) for _, geom, T in self.env]  # static: made once
         self.object, verts = _mesh(scene.object_mesh), np.asarray(scene.object_mesh.vertices, float)
         self.object_centre, self.object_radius = _radius(self.object, verts)
         self.closed, self.object_box = ClosedMesh(scene.object_mesh), (verts.min(axis=0), verts.max(axis=0))
@@ -165,8 +170,12 @@ class Oracle:
     def _environment_hits(self, poses: list[np.ndarray], centres: np.ndarray) -> list[str]:
         moving = np.array(self.moving)
         near = np.linalg.norm(centres[moving, None] - self.env_centre[None], axis=2) < self.radius[moving, None] + self.env_radius
+        for e, (inverse, half) in self.boxes.items():
+            local = centres[moving] @ inverse[:3, :3].T + inverse[:3, 3]
+            near[:, e] &= np.linalg.norm(np.maximum(np.abs(local) - half, 0.0), axis=1) < self.radius[moving]
         return [f"{self.names[moving[a]]} with {self.env[e][0]}" for a, e in zip(*np.nonzero(near))
-                if hit(self.shapes[moving[a]], poses[moving[a]], self.env[e][1], self.env[e][2])]
+                if fcl.collide(fcl.CollisionObject(self.shapes[moving[a]], _tf(poses[moving[a]])), self.env_objects[e],
+                               fcl.CollisionRequest(), fcl.CollisionResult()) > 0]
 
     def _self_hits(self, poses: list[np.ndarray], centres: np.ndarray) -> list[str]:
         i, j = self.pairs
