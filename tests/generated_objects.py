@@ -75,8 +75,9 @@ def write_task(object_path: Path, placement: str, folder: Path) -> Path:
     return path
 
 
-def plan_outcome(task: Path, out: Path, seed: int = 0) -> str:
-    """'N double grasps', or the failing step and its message, of `plan --until double-grasps` on a task."""
+def plan_outcome(task: Path, out: Path, seed: int = 0, params: dict | None = None) -> str:
+    """'N double grasps', or the failing step and its message, of `plan --until double-grasps` on a task (with these
+    step parameters)."""
     from planner.core.errors import RegraspError
     from planner.core.runner import run_pipeline
     from planner.core.session import Session
@@ -85,7 +86,7 @@ def plan_outcome(task: Path, out: Path, seed: int = 0) -> str:
 
     try:
         session = Session.create(out, load_task(task), seed, force=True)
-        run_pipeline(session, "double_grasps", warn=lambda message: None)
+        run_pipeline(session, "double_grasps", params, warn=lambda message: None)
     except StepFailed as exc:
         return f"failed at {exc.step}: {exc.failure}"
     except RegraspError as exc:
