@@ -23,6 +23,7 @@ def regrasp(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "workbench.cli", *args], capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow  # 4-6 s: kept out of the fast subset (CI runs it)
 def test_check_default_task():
     run = regrasp("check", "default")
     assert run.returncode == 0, run.stdout + run.stderr
@@ -65,6 +66,7 @@ def test_check_reports_a_task_that_needs_no_regrasp(tmp_path):
     assert "handover = true" in run.stdout and "OK: a valid pick-and-place task for one arm (no handover)" in run.stdout
 
 
+@pytest.mark.slow  # 4-6 s: kept out of the fast subset (CI runs it)
 def test_bench_collision_json(tmp_path):
     out = tmp_path / "bench.json"
     run = regrasp("bench", "collision", "--samples", "300", "--json", str(out))

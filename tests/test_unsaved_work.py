@@ -45,6 +45,7 @@ def _kept(sessions: Path) -> list[str]:
     return sorted(p.name for p in sessions.iterdir() if "-unsaved-" in p.name)
 
 
+@pytest.mark.slow  # 4-6 s: kept out of the fast subset (CI runs it)
 def test_switching_the_task_keeps_the_steps_run(bench: Workbench, sessions: Path) -> None:
     scratch = _run_arms(bench)
     bench._load(TASKS_DIR / "baxter.toml", None)
@@ -71,6 +72,7 @@ def test_loading_a_session_or_closing_keeps_them_too(bench: Workbench, sessions:
     assert Session.open(sessions / "default-unsaved-2").finished() == ["arms", "pick_grasps"]
 
 
+@pytest.mark.slow  # 4-6 s: kept out of the fast subset (CI runs it)
 def test_saved_work_and_an_untouched_copy_are_not_kept_again(bench: Workbench, sessions: Path) -> None:
     _run_arms(bench)
     bench.session_panel.save("mine")

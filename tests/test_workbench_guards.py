@@ -71,6 +71,7 @@ def test_good_names_are_kept() -> None:
         ["plain", "with-dash_and_underscore", "Übung2", "padded"]
 
 
+@pytest.mark.slow  # 4-6 s: kept out of the fast subset (CI runs it)
 def test_task_loading_is_refused_while_a_run_goes(bench: Workbench, blocked_run: threading.Event) -> None:
     panel = bench.session_panel
     scene = bench.scene

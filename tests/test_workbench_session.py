@@ -161,6 +161,7 @@ def test_save_never_overwrites_without_confirmation(workbench: Workbench, page: 
     assert _files(saved.folder) == _files(workbench.session.folder)
 
 
+@pytest.mark.slow  # 4-6 s: kept out of the fast subset (CI runs it)
 def test_rerun_from_here_makes_a_new_session_and_keeps_the_original(workbench: Workbench, sessions_dir: Path) -> None:
     panel = workbench.session_panel
     assert panel.load(sessions_dir / "first")
