@@ -97,6 +97,21 @@ def test_default_suite_has_fifty_tasks_and_six_objects():
     assert "statuette" in [o.builtin for o in spec.objects] and sum(not o.builtin for o in spec.objects) >= 5
 
 
+def test_a_failed_motion_names_the_phase_and_part_its_first_sequence_failed_at():
+    """The suite groups failures by stage: a motion's is where its first sequence failed, not the sequence's name."""
+    from types import SimpleNamespace
+
+    from planner.suite.job import _failed_stage
+
+    said = "table through placement 3 on desk_top, grasps 97 and 34 (32.0 s estimated): Grasp phase, approach: collides (a)"
+    motion = SimpleNamespace(stages=[{"stage": "regrasp graph", "count": 2}], tried=[said, "double grasp 1: Carry phase"])
+    assert _failed_stage(SimpleNamespace(result=lambda step: motion), "motion") == "Grasp phase, approach"
+    motion.stages[0]["count"] = 0  # no sequence: the stage that kept none
+    assert _failed_stage(SimpleNamespace(result=lambda step: motion), "motion") == "regrasp graph"
+    bare = SimpleNamespace(stages=[], tried=["no transit"])
+    assert _failed_stage(SimpleNamespace(result=lambda step: bare), "motion") == "no transit"
+
+
 def test_task_files_are_written_as_they_were_read():
     for name in ("default", "baxter"):
         data = load_toml(find_task(name))

@@ -97,12 +97,13 @@ class JobResult:
 
 
 def _failed_stage(session: Session, step: str) -> str:
-    """The first stage of a failed step's result that kept nothing; for the motion, where its best double grasp failed
-    (e.g. 'Place phase, set-down'); '' when the step tells neither."""
+    """The first stage of a failed step's result that kept nothing; for the motion, where its first sequence tried failed
+    (e.g. 'Place phase, set-down' of 'double grasp 1 (36.5 s estimated): Place phase, set-down: collides ...'); ''
+    when the step tells neither."""
     result = session.result(step)
     emptied = next((s["stage"] for s in getattr(result, "stages", None) or [] if s["count"] == 0), "")
-    tried = getattr(result, "tried", None) or [""]
-    return emptied or tried[0].partition(":")[0]
+    said = (getattr(result, "tried", None) or [""])[0].split(": ")
+    return emptied or said[min(1, len(said) - 1)]
 
 
 def _running(session: Session | None) -> str:
