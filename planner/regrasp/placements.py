@@ -7,8 +7,12 @@ landing on each) are put on every support (the top face of an upright box
 obstacle: the desk top, a shelf) on a grid of positions, at several headings. A placement is kept when the object
 there is clear of every other obstacle and of the robot's fixed base; each arm's reach of its centre of mass is
 recorded (reach.py: the fingertip centre brought there by the arm and the torso, collision-free). The stages say how
-many were dropped and why. Ordered for the table handover: both arms reaching first, then by the distance the object
-travels from its initial placement through it to its final one, then the more probable resting pose first. A step of
+many were dropped and why. The task's own headings are among them: where the final placement rests on the initial's
+face, that face is also put down at the final heading and halfway between the two. Ordered for the table handover:
+both arms reaching first, then by how far the object goes from its initial placement through it to its final one
+(the distance travelled plus `turn` metres per radian it turns: the hands' grasps were chosen at the task's two
+orientations, and a grasp from above stays one where the object turns little), the placement midway between the
+two ends first where that ties, then the more probable resting pose first. A step of
 its own (needing only the scene) so the motion's strategies read one list, a session keeps it and the workbench draws
 it; an empty list fails nothing (the handover needs none).
 """
@@ -43,6 +47,8 @@ class PlacementParams:
     min_probability: float = bounded(0.05, 0.0, 1.0, "(probability)", "resting poses less likely are left out")
     seeds: int = bounded(4, 1, 1000, "IK starts", "IK starts per arm and position, to find which arm reaches it")
     tolerance: float = bounded(0.02, 0.001, 0.2, "m", "reach brings the fingertip centre this near the centre of mass")
+    turn: float = bounded(0.2, 0.0, 10.0, "m/rad", "ordering: each radian the object turns through a placement counts as this "
+                          "much travel")
 
 
 @dataclass(frozen=True)
@@ -65,12 +71,13 @@ class Placements:
                 "reached_by_both": int(self.reached.all(axis=1).sum()) if len(self) else 0}
 
 
-def resting_poses(scene: Scene, min_probability: float) -> tuple[list[np.ndarray], list[float]]:
+def resting_poses(scene: Scene, min_probability: float) -> tuple[list[np.ndarray], list[float], list[float]]:
     """The object's resting poses (object frame to a frame whose origin is under the centre of mass, on the support's
     plane z = 0): first those of the task's initial and final placements (the object rests there, and the hands' grasps
     were chosen for them), then trimesh's stable poses at least `min_probability` likely, most likely first, each
     resting on a face no earlier one rests on. A task's pose takes the probability of trimesh's pose on the same face
-    (0 when it has none)."""
+    (0 when it has none). Third: the headings the task adds to the first pose (the final placement's and the one
+    halfway to it, when the final rests on the initial's face; none else)."""
     mesh = scene.object_mesh
     transforms, probabilities = mesh.compute_stable_poses(center_mass=mesh.center_mass)
     stable = sorted(zip(transforms, probabilities), key=lambda tp: -tp[1])
@@ -86,7 +93,12 @@ def resting_poses(scene: Scene, min_probability: float) -> tuple[list[np.ndarray
         T[:3, 3] -= [com[0], com[1], low]
         out.append(T)
         kept.append(float(p))
-    return out, kept
+    turn = scene.object_final[:3, :3] @ scene.object_initial[:3, :3].T  # about the vertical when on the same face
+    extra = []
+    if np.dot(down(scene.object_initial), down(scene.object_final)) > UPRIGHT:
+        angle = float(np.arctan2(turn[1, 0], turn[0, 0]))
+        extra = [a for a in (angle, angle / 2) if abs(angle) > 1e-6]
+    return out, kept, extra
 
 
 def down(T: np.ndarray) -> np.ndarray:
@@ -122,7 +134,7 @@ def stable_placements(scene: Scene, p: PlacementParams, progress: Progress = no_
     """Every stable placement of the object on the scene's supports (see the module), best first, and the seconds of
     each stage."""
     log = StageLog()
-    rests, probabilities = resting_poses(scene, p.min_probability)
+    rests, probabilities, extra = resting_poses(scene, p.min_probability)
     log.done("resting poses", len(rests), f"the task's, then others at least {p.min_probability:g} likely")
     mesh = scene.object_mesh
     com = np.asarray(mesh.center_mass, float)
@@ -132,15 +144,17 @@ def stable_placements(scene: Scene, p: PlacementParams, progress: Progress = no_
     positions = [(name, x) for name, grid in grids.items() for x in grid]
     log.done("positions on supports", len(positions), f"{sum(1 for g in grids.values() if len(g))} supports, "
              f"{p.spacing:g} m apart, {margin:.3f} m inside the edges")
-    candidates = [(name, x, k, h) for name, x in positions for k in range(len(rests)) for h in range(p.headings)]
-    log.done("candidate placements", len(candidates), f"x {len(rests)} resting poses x {p.headings} headings")
+    headings = [[2 * np.pi * h / p.headings for h in range(p.headings)] + (extra if k == 0 else []) for k in range(len(rests))]
+    candidates = [(name, x, k, a) for name, x in positions for k in range(len(rests)) for a in headings[k]]
+    log.done("candidate placements", len(candidates), f"x {len(rests)} resting poses x {p.headings} headings"
+             + (f", and the task's {len(extra)} on its first" if extra else ""))
     shape = coal_mesh(mesh)
     collision = ObjectCollision(scene)
     tests = {name: ObstacleTest([(ob.coal_shape(), ob.pose) for ob in env if ob.name != name] + collision.fixed_base,
                                 collision.static.margin) for name, grid in grids.items() if len(grid)}
     clear = []
-    for name, x, k, h in candidates:
-        T = yaw(2 * np.pi * h / p.headings) @ rests[k]
+    for name, x, k, a in candidates:
+        T = yaw(a) @ rests[k]
         T[:3, 3] += x + [0.0, 0.0, LIFTED]
         if not tests[name].hits([(shape, T)]):
             T[2, 3] -= LIFTED
@@ -162,13 +176,22 @@ def stable_placements(scene: Scene, p: PlacementParams, progress: Progress = no_
     flags_arr = np.array(flags, bool).reshape(-1, len(arms))
     log.done("reached by an arm", int(flags_arr.any(axis=1).sum()), f"{len(reached)} positions tried, {p.seeds} IK starts per arm")
     log.done("reached by both arms", int(flags_arr.all(axis=1).sum()), "where one hand can set it down for the other")
-    ends = [scene.object_initial[:3, :3] @ com + scene.object_initial[:3, 3], scene.object_final[:3, :3] @ com + scene.object_final[:3, 3]]
-    travel = [sum(np.linalg.norm(T[:3, :3] @ com + T[:3, 3] - e) for e in ends) for _, T, _ in clear]
-    order = sorted(range(len(clear)), key=lambda i: (-int(flags_arr[i].all()), round(travel[i], 6), -clear[i][2], i))
+    ends = (scene.object_initial, scene.object_final)
+    way = [_way(T, ends, com, p.turn) for _, T, _ in clear]
+    order = sorted(range(len(clear)), key=lambda i: (-int(flags_arr[i].all()), *way[i], -clear[i][2], i))
     return Placements(arms, [clear[i][0] for i in order], log.stages,
                       np.array([clear[i][1] for i in order]).reshape(-1, 4, 4), np.array([clear[i][2] for i in order]),
                       flags_arr[order].reshape(-1, len(arms))), log.seconds
 
+
+
+def _way(T: np.ndarray, ends: tuple[np.ndarray, np.ndarray], com: np.ndarray, turn: float) -> tuple[float, float]:
+    """(how far the object goes from the first end through T to the second: metres travelled plus `turn` per radian
+    turned; how much farther it is from one end than from the other), in whole centimetres: positions of a grid row
+    along the way tie on the first, and the second puts the middle one first."""
+    d = [float(np.linalg.norm(T[:3, :3] @ com + T[:3, 3] - (E[:3, :3] @ com + E[:3, 3]))) for E in ends]
+    turned = sum(float(np.arccos(np.clip((np.trace(T[:3, :3].T @ E[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))) for E in ends)
+    return round(sum(d) + turn * turned, 2), round(abs(d[0] - d[1]), 2)
 
 
 def run(ctx: StepContext) -> StepOutput:
