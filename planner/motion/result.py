@@ -25,6 +25,8 @@ class MotionParams:
     pregrasp_distance: float = bounded(0.06, 0.0, 0.5, "m", "a hand backs off this far along its approach direction before it approaches")
     lift: float = bounded(0.06, 0.001, 0.5, "m", "the object is lifted off and set down by this much (or twice), vertically where free")
     lift_candidates: int = bounded(8, 1, 100, "motions", "lift and set-down motions tried, freest first")
+    place_starts: int = bounded(24, 0, 1000, "IK starts", "placing fails: other arm configurations at the grasp are sought "
+                                "from this many random IK starts")
     preshape: float = bounded(1.0, 0.0, 1.0, "(fraction)", "fingers before an approach: this fraction of the way from the grasp to open")
     release: float = bounded(0.6, 0.0, 1.0, "(fraction)", "fingers letting go: this fraction of the way open before the hand retreats")
     straight_steps: int = bounded(4, 1, 100, "waypoints", "IK waypoints on each straight hand motion")
@@ -58,7 +60,7 @@ class MotionParams:
     contact_seconds: float = bounded(1.0, 0.0, 60.0, "s", "regrasp graph: each contact motion's estimated time (transits: joint "
                                      "distance over max_velocity)")
     regrasp_grasps: int = bounded(8, 1, 1000, "grasps", "table, regrasp: each hand's grasps tried at a placement, best scored first")
-    table_placements: int = bounded(6, 1, 1000, "placements", "table, regrasp: intermediate placements the arms reach tried, best first")
+    table_placements: int = bounded(24, 1, 1000, "placements", "table, regrasp: intermediate placements the arms reach tried, best first")
     table_candidates: int = bounded(16, 1, 1000, "motions", "table, regrasp: (placement, pick grasp, place grasp) motions tried, each")
 
     def problem(self) -> str:
