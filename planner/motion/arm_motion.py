@@ -6,7 +6,6 @@ off from a grasp along its approach direction by the pre-grasp distance (see fal
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
 
 import numpy as np
 import pinocchio as pin
@@ -18,8 +17,6 @@ from planner.motion.phase import Phase
 from planner.motion.piece import PieceFailed
 from planner.motion.result import MotionParams
 from planner.motion.transit import TransitStats
-
-DISTINCT = 0.1  # rad: configurations nearer than this at every joint are one (see ArmMotions.others)
 
 
 class ArmMotions:
@@ -51,25 +48,6 @@ class ArmMotions:
         if found is None:
             raise PieceFailed(phase, part, "the arm cannot put its palm exactly at the grasp")
         return found
-
-    def others(self, q: np.ndarray, arm: str, rng: np.random.Generator) -> Iterator[np.ndarray]:
-        """Other configurations with the arm's palm where it is at q to 0.1 mm (the other arm's joints as at q): IK from
-        `place_starts` starts drawn uniformly over the torso's and the arm's ranges, each differing from q and from those
-        before it by more than `DISTINCT` rad at some joint. For a placement at the edge of the arm's reach, where the
-        configuration the grasp search kept leaves its wrist by an obstacle that every motion away from it meets."""
-        robot, target = self.robot, self.palm(q, arm)
-        idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
-        if (arm,) not in self.iks:
-            self.iks[(arm,)] = ArmIK(robot, (arm,))
-        seen = [q[idx]]
-        for _ in range(self.p.place_starts):
-            start = q.copy()
-            start[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
-            near = self.iks[(arm,)].solve(target, start, 200, 1e-3, 1e-2, stall=8)
-            found = self._ik(near.q, arm, target, None, 1e-4, damping=1e-9) if near.within(1e-3, 1e-2) else None
-            if found is not None and all(np.abs(found[idx] - x).max() > DISTINCT for x in seen):
-                seen.append(found[idx])
-                yield found
 
     def straight(self, q: np.ndarray, arm: str, offset: np.ndarray, keep: str | None, phase: Phase, part: str) -> np.ndarray:
         """IK waypoints moving the arm's palm by a world offset in a straight line, `keep`'s palm still: (steps+1, nq)."""

@@ -17,8 +17,9 @@ run at once (runner.py); where a transit fails, the next candidate end of that h
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from planner.motion.fallbacks import freest, options, raise_first, retreats
 from planner.motion.fingers import Fingers
 from planner.motion.graph import MotionGraph
 from planner.motion.phase import Phase
-from planner.motion.piece import HandGrasp, Piece, PieceFailed
+from planner.motion.piece import TRANSIT_PARTS, HandGrasp, Piece, PieceFailed
 from planner.motion.result import MotionParams
 from planner.motion.runner import Job, run_transits
 from planner.motion.space import JointSpace
@@ -62,7 +63,24 @@ class DoubleGraspPlanner:
         """The jobs' pieces (or failures), run at once (see runner.py)."""
         robot = self.scene.robot
         weights = None if self.baseline else JointSpace.of(robot.lower, robot.upper, self.contact.transit_idx, self.hand.open)
-        return run_transits(jobs, self.stage, self.graph, self.rng, self.stats, weights)
+        return [self.patiently(job, result) for job, result in zip(jobs, run_transits(jobs, self.stage, self.graph, self.rng,
+                                                                                        self.stats, weights))]
+
+    def patiently(self, job: Job, result: list[Piece] | PieceFailed) -> list[Piece] | PieceFailed:
+        """The job's result; where its transit failed on the graph, the job run again here, RRTConnect given two more
+        reconnections of the phase, each with the budget of a whole query of the baseline planner (`rrt_motions`, not
+        `reconnect_motions`): every contact motion of the sequence is made by then, and a transit out of a tight spot
+        (a wrist under a lamp) is cheaper to search longer than the sequence is to give up."""
+        if self.baseline or not isinstance(result, PieceFailed) or result.part != TRANSIT_PARTS[0]:
+            return result
+        phase, run = job
+        stats = self.stats[phase]
+        patient = dataclasses.replace(self.p, reconnect_motions=self.p.rrt_motions,
+                                      phase_reconnections=stats.rrt_calls + self.p.max_reconnections)
+        try:
+            return run(TransitStage(phase, self.validities, self.graph.copy(), self.rng, stats, patient, False))
+        except PieceFailed:
+            return result
 
     def away_targets(self, q: np.ndarray, arm: str, q_place: np.ndarray, situation: Situation) -> list[np.ndarray]:
         """Where the picking arm alone may go from its retreat, in order (see TransitStage.away): q with that arm as it
@@ -150,45 +168,6 @@ class DoubleGraspPlanner:
         backing = itertools.chain(*retreats(self.arms, q_let, g.arm, None, True, phase, "retreat"))
         return let, opening + next(options(phase, "retreat", backing, self.leave(let_go, Situation(None, pose), phase, g.arm)))
 
-    def placings(self, q: np.ndarray, arm: str, build: Callable[[np.ndarray], tuple]) -> Iterator[tuple]:
-        """What `build` makes of the place motions from q (the placing hand at its grasp at the final placement), then
-        from each other configuration with the palm there (ArmMotions.others, on a stream spawned from the plan's
-        without drawing from it) they can be built from; the failure from q when none can."""
-        def configurations() -> Iterator[np.ndarray]:
-            yield q
-            yield from self.arms.others(q, arm, self.rng.spawn(1)[0])
-
-        failure: PieceFailed | None = None
-        built = False
-        for other in configurations():
-            try:
-                made = build(other)
-            except PieceFailed as exc:
-                failure = failure or exc
-                continue
-            built = True
-            yield made
-        if not built:
-            raise failure
-
-    def placed_again(self, places: Iterator[tuple], results: tuple, phase: Phase, start: np.ndarray, held: Situation
-                     ) -> tuple[list[Piece], ...] | None:
-        """None when neither of `results` (the transit to above the placement: Place's, or Carry's in a direct transfer
-        or a table handover; Rest's) failed; else (that transit with the set-down, the release, the Rest transit, the
-        hands opening) from the next of `places` whose two transits are found, run here one after the other; the first
-        failure when none."""
-        failed = next((r for r in results if isinstance(r, PieceFailed)), None)
-        if failed is None:
-            return None
-        for downs, first_down, released, q_end, opening in places:
-            try:
-                reach = self.stage(phase).reach(start, downs, first_down, held)
-                rest = [self.stage(REST).transit(released[-1].path[-1], q_end, Situation(None, self.scene.object_final))]
-            except PieceFailed:
-                continue
-            return reach, released, rest, opening
-        raise failed
-
     def rest(self, fingers: dict[str, np.ndarray], pose: np.ndarray) -> tuple[np.ndarray, list[Piece]]:
         """(where the Rest transit ends, the hands opening there): q_final with each hand's fingers as they let go."""
         q_end = self.scene.q_final
@@ -246,16 +225,13 @@ class DoubleGraspPlanner:
             retreat_a = next(options(CARRY, "retreat", backing, self.leave(released, held_b, CARRY, a.arm)))
 
         # Place: (above the placement, set-down) candidates; the picking hand keeps its fingers as they let go until the
-        # end (opened near the object, they hit it); in a direct transfer it is the hand that holds the object. Rest: to
-        # the final configuration, then both hands open. Where these cannot be made, another configuration holding the
-        # same grasp is tried
-        def place(q_down: np.ndarray) -> tuple:
-            downs, first_down = self.set_downs(PLACE, q_down, b.arm, g_b, of)
-            let_b, released_b = self.release(PLACE, q_down, b, of)
-            return (downs, first_down, released_b) + self.rest({b.arm: let_b} if direct else {a.arm: let_a, b.arm: let_b}, of)
+        # end (opened near the object, they hit it); in a direct transfer it is the hand that holds the object
+        q_down = q_place if direct else hand.set(q_place, a.arm, let_a)
+        downs, first_down = self.set_downs(PLACE, q_down, b.arm, g_b, of)
+        let_b, released_b = self.release(PLACE, q_down, b, of)
 
-        places = self.placings(q_place if direct else hand.set(q_place, a.arm, let_a), b.arm, place)
-        downs, first_down, released_b, q_end, opening = next(places)
+        # Rest: to the final configuration, then both hands open
+        q_end, opening = self.rest({b.arm: let_b} if direct else {a.arm: let_a, b.arm: let_b}, of)
 
         # the transits: independent of each other now that every contact motion is made; run longest first as measured
         # (Carry's, Place's, Rest's, Grasp's, the arm away), so the last to finish is a short one
@@ -264,10 +240,7 @@ class DoubleGraspPlanner:
         if direct:  # carried by the one hand from the lift to above the placement
             carry, rest, to_grasp = self.transits([(CARRY, lambda s: s.reach(q_lifted, downs, first_down, held_a)), to_rest,
                                                    to_grasp])
-            raise_first([to_grasp])
-            again = self.placed_again(places, (carry, rest), CARRY, q_lifted, held_a)
-            if again:
-                carry, released_b, rest, opening = again
+            raise_first([to_grasp, carry, rest])
             return to_grasp + lifted + carry + released_b + rest + opening
         # the picking arm alone away from the object, then the Place transit from where it went: both at once, the second
         # assuming the first reaches its first target; when it does not, the other targets are tried after them
@@ -282,11 +255,6 @@ class DoubleGraspPlanner:
         if targets and not away:
             place = self.stage(PLACE)
             away = place.away(q_retreat, a.arm, targets[1:], held_b)
-            try:
-                to_place = place.reach((away or retreat_a)[-1].path[-1], downs, first_down, held_b)
-            except PieceFailed as exc:
-                to_place = exc
-        again = self.placed_again(places, (to_place, rest), PLACE, (away or retreat_a)[-1].path[-1], held_b)
-        if again:
-            to_place, released_b, rest, opening = again
+            to_place = place.reach((away or retreat_a)[-1].path[-1], downs, first_down, held_b)
+        raise_first([to_place, rest])
         return to_grasp + lifted + carry + let_go_a + retreat_a + away + to_place + released_b + rest + opening

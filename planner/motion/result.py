@@ -25,8 +25,6 @@ class MotionParams:
     pregrasp_distance: float = bounded(0.06, 0.0, 0.5, "m", "a hand backs off this far along its approach direction before it approaches")
     lift: float = bounded(0.06, 0.001, 0.5, "m", "the object is lifted off and set down by this much (or twice), vertically where free")
     lift_candidates: int = bounded(8, 1, 100, "motions", "lift and set-down motions tried, freest first")
-    place_starts: int = bounded(24, 0, 1000, "IK starts", "placing fails: other arm configurations at the grasp are sought "
-                                "from this many random IK starts")
     preshape: float = bounded(1.0, 0.0, 1.0, "(fraction)", "fingers before an approach: this fraction of the way from the grasp to open")
     release: float = bounded(0.6, 0.0, 1.0, "(fraction)", "fingers letting go: this fraction of the way open before the hand retreats")
     straight_steps: int = bounded(4, 1, 100, "waypoints", "IK waypoints on each straight hand motion")

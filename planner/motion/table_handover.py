@@ -53,15 +53,9 @@ def plan_table(planner: DoubleGraspPlanner, q_grasp: np.ndarray, q_set: np.ndarr
     q_place = hand.set(arms.refine(hand.set(q_place, a.arm, held_fingers), b.arm, of @ g_b, None, PLACE, "place"), b.arm, b.fingers)
     takes, first_take = planner.pick_up(REGRASP, q_take, b, pose)
     q_lifted_b, lifted_b = planner.lift(CARRY, q_take, b, g_b, pose)
-
-    def place(q_down: np.ndarray) -> tuple:
-        downs, first_down = planner.set_downs(PLACE, q_down, b.arm, g_b, of)
-        let_b, released_b = planner.release(PLACE, q_down, b, of)
-        # one arm: its fingers as it let go the second time
-        return (downs, first_down, released_b) + planner.rest({a.arm: let_a, b.arm: let_b}, of)
-
-    places = planner.placings(q_place, b.arm, place)
-    downs, first_down, released_b, q_end, opening = next(places)
+    downs, first_down = planner.set_downs(PLACE, q_place, b.arm, g_b, of)
+    let_b, released_b = planner.release(PLACE, q_place, b, of)
+    q_end, opening = planner.rest({a.arm: let_a, b.arm: let_b}, of)  # one arm: its fingers as it let go the second time
 
     held_a, held_b = Situation(a.arm, g_a), Situation(b.arm, g_b)
     q_after = released_a[-1].path[-1]
@@ -71,8 +65,5 @@ def plan_table(planner: DoubleGraspPlanner, q_grasp: np.ndarray, q_set: np.ndarr
         (REST, lambda s: [s.transit(released_b[-1].path[-1], q_end, Situation(None, of))]),
         (GRASP, lambda s: s.reach(scene.q_initial, grasps, first_grasp, Situation(None, oi))),
         (REGRASP, lambda s: s.reach(q_after, takes, first_take, Situation(None, pose)))])
-    raise_first([to_grasp, to_table, to_take])
-    again = planner.placed_again(places, (carry, rest), CARRY, q_lifted_b, held_b)
-    if again:
-        carry, released_b, rest, opening = again
+    raise_first([to_grasp, to_table, to_take, carry, rest])
     return to_grasp + lifted + to_table + released_a + to_take + lifted_b + carry + released_b + rest + opening
