@@ -115,11 +115,11 @@ def _step_files(folder: Path) -> dict[str, bytes]:
 
 
 @pytest.mark.slow
-def test_killed_plan_resumes_to_the_same_result(tmp_path):
-    whole = tmp_path / "whole"
-    outcome = _plan(whole).returncode  # 0, or 1 when a step recorded a failure (the motion may find none)
-    assert outcome in (0, 1)
-    assert [r["name"] for r in json.loads((whole / MANIFEST).read_text())["steps"]] == [s.name for s in PIPELINE]
+def test_killed_plan_resumes_to_the_same_result(planned, tmp_path):
+    """`plan default --seed 3` killed once grasp_configs is saved, then resumed: the same step files and records as the
+    run in one go (`planned`, which a whole `regrasp plan` run matches byte for byte: see the warm-cache test)."""
+    whole, _ = planned
+    outcome = 0
     cut = tmp_path / "cut"
     assert _plan(cut, kill_after="grasp_configs").returncode == -signal.SIGKILL
     names = [s.name for s in PIPELINE]
