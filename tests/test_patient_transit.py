@@ -1,10 +1,10 @@
-"""A transit the graph and its quick reconnections cannot find is searched again, patiently, before the sequence is
-given up (DoubleGraspPlanner.patiently).
+"""A transit the graph and its quick reconnections cannot find is searched again by a patient planner
+(DoubleGraspPlanner.patiently), as the strategies plan the sequences that failed at a transit when none moved.
 
 On the example session, the Rest transit is planned with a graph joined to its ends by one edge at most and
-reconnections of one motion check each: it fails when run as the phase's transits run (runner.run_transits), and the
-planner's own run finds it with RRTConnect given a whole query's budget. The path found is checked independently:
-the robot's URDF geometry through python-fcl, against the scene and the object at its final placement, every 0.01 rad.
+reconnections of one motion check each: the quick planner fails, the patient one finds it with RRTConnect given a
+whole query's budget. The path found is checked independently: the robot's URDF geometry through python-fcl, against
+the scene and the object at its final placement, every 0.01 rad.
 """
 from __future__ import annotations
 
@@ -22,8 +22,6 @@ from planner.motion.graph import MotionGraph
 from planner.motion.phase import Phase
 from planner.motion.piece import PieceFailed
 from planner.motion.result import MotionParams
-from planner.motion.runner import run_transits
-from planner.motion.space import JointSpace
 from planner.motion.step import contact_profile
 from planner.motion.transit_stage import transit_joints
 from planner.motion.validities import Validities
@@ -44,18 +42,16 @@ def test_a_transit_the_quick_search_misses_is_found_patiently():
     situation = Situation(None, scene.object_final)
     job = (Phase.REST, lambda stage: [stage.transit(qa, qb, situation)])
 
-    def planner() -> DoubleGraspPlanner:
+    def planner(patient: bool) -> DoubleGraspPlanner:
         validities = Validities(scene, build_collision_model(robot, scene.environment),
                                 transit_profile(roadmap.resolution, HURRIED.transit_env_padding, HURRIED.transit_self_padding),
                                 contact_profile(HURRIED))
-        return DoubleGraspPlanner(scene, validities, MotionGraph(roadmap), HURRIED, np.random.default_rng(0), False)
+        return DoubleGraspPlanner(scene, validities, MotionGraph(roadmap), HURRIED, np.random.default_rng(0), False, patient)
 
-    hurried = planner()
-    weights = JointSpace.of(robot.lower, robot.upper, idx, hurried.hand.open)
-    quick = run_transits([job], hurried.stage, hurried.graph, hurried.rng, hurried.stats, weights)[0]
+    quick = planner(False).transits([job])[0]
     assert isinstance(quick, PieceFailed), "the hurried search found the transit: nothing left to find patiently"
 
-    patient = planner()
+    patient = planner(True)
     found = patient.transits([job])[0]
     assert not isinstance(found, PieceFailed), f"not found patiently either: {found}"
     assert patient.stats[Phase.REST].rrt_calls > HURRIED.max_reconnections, "no patient reconnection was made"

@@ -46,8 +46,9 @@ class DoubleGraspPlanner:
     """Builds the pieces of one double grasp from its stages; keeps per-phase Table I figures in `stats`."""
 
     def __init__(self, scene: Scene, validities: Validities, graph: MotionGraph, params: MotionParams,
-                 rng: np.random.Generator, baseline: bool):
+                 rng: np.random.Generator, baseline: bool, patient: bool = False):
         self.scene, self.validities, self.graph, self.p, self.rng, self.baseline = scene, validities, graph, params, rng, baseline
+        self.patient = patient  # a transit that fails is searched again, longer (see patiently)
         self.stats = [TransitStats() for _ in Phase]
         self.arms = ArmMotions(scene.robot, validities.data, params, self.stats)
         self.hand = Fingers(validities.cm)
@@ -67,11 +68,11 @@ class DoubleGraspPlanner:
                                                                                         self.stats, weights))]
 
     def patiently(self, job: Job, result: list[Piece] | PieceFailed) -> list[Piece] | PieceFailed:
-        """The job's result; where its transit failed on the graph, the job run again here, RRTConnect given two more
-        reconnections of the phase, each with the budget of a whole query of the baseline planner (`rrt_motions`, not
-        `reconnect_motions`): every contact motion of the sequence is made by then, and a transit out of a tight spot
-        (a wrist under a lamp) is cheaper to search longer than the sequence is to give up."""
-        if self.baseline or not isinstance(result, PieceFailed) or result.part != TRANSIT_PARTS[0]:
+        """The job's result; for a patient planner, where its transit failed on the graph, the job run again here,
+        RRTConnect given two more reconnections of the phase, each with the budget of a whole query of the baseline
+        planner (`rrt_motions`, not `reconnect_motions`): a transit out of a tight spot (a wrist under a lamp) can need
+        more than the quick search (strategies.py plans a sequence so when none moved without it)."""
+        if not self.patient or self.baseline or not isinstance(result, PieceFailed) or result.part != TRANSIT_PARTS[0]:
             return result
         phase, run = job
         stats = self.stats[phase]

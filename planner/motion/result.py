@@ -37,6 +37,8 @@ class MotionParams:
     max_reconnections: int = bounded(2, 0, 100, "calls", "transit: RRTConnect calls per query (then the next candidate end)")
     phase_reconnections: int = bounded(4, 0, 1000, "calls", "transit: RRTConnect calls per phase (then its queries search the graph only)")
     reconnect_motions: int = bounded(1000, 1, 1000000, "motion checks", "a budget of one RRTConnect reconnection (counts: any machine)")
+    patient_sequences: int = bounded(4, 0, 1000, "sequences", "when none moved: the first that failed at a transit, again with "
+                                     "rrt_motions per reconnection")
     rrt_motions: int = bounded(20000, 1, 1000000, "motion checks", "a budget of one RRTConnect query of the baseline planner 'rrt'")
     rrt_step: float = bounded(0.5, 0.01, 10.0, "rad", "RRTConnect's range (longest extension, joint-space distance)")
     shortcut_attempts: int = bounded(30, 0, 10000, "shortcuts", "random straight shortcuts per transit, after the greedy ones")

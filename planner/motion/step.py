@@ -81,8 +81,8 @@ def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGras
     contact = contact_profile(p)
     graph = MotionGraph(roadmap)
 
-    def make() -> DoubleGraspPlanner:
-        return DoubleGraspPlanner(scene, Validities(scene, cm, transit, contact), graph, p, rng, baseline=p.planner == "rrt")
+    def make(patient: bool) -> DoubleGraspPlanner:
+        return DoubleGraspPlanner(scene, Validities(scene, cm, transit, contact), graph, p, rng, p.planner == "rrt", patient)
 
     attempt = strategies.plan_sequences(make, scene, pick, place, dg, configs, placements, p, rng, progress)
     resolution = {"transit": transit.describe(), "contact": contact.describe(),

@@ -25,7 +25,7 @@ from planner.handover.grasp_configs import GraspConfigParams, GraspConfigs
 from planner.model.task import Scene
 from planner.motion.double_grasp import DoubleGraspPlanner
 from planner.motion.phase import Phase
-from planner.motion.piece import HandGrasp, Piece, PieceFailed
+from planner.motion.piece import TRANSIT_PARTS, HandGrasp, Piece, PieceFailed
 from planner.motion.result import STRATEGIES, MotionParams
 from planner.motion.table_handover import plan_table
 from planner.regrasp.graph import HANDOVER, REGRASP, TABLE, CostModel, Search, Sequence
@@ -112,11 +112,13 @@ class Skips:
             self.carrying.add(s)
 
 
-def plan_sequences(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps,
+def plan_sequences(make: Callable[[bool], DoubleGraspPlanner], scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGrasps,
                    configs: tuple[GraspConfigs, GraspConfigParams] | None, placements: Placements | None, p: MotionParams,
                    rng: np.random.Generator, progress: Progress) -> Attempt:
     """The cheapest sequence of the regrasp graph whose whole motion is valid (see the module): at most
-    `max_double_grasps` handovers and `table_candidates` table handovers or regrasps planned."""
+    `max_double_grasps` handovers and `table_candidates` table handovers or regrasps planned; when none moves, the first
+    `patient_sequences` of them that failed at a transit are planned again by a patient planner (`make(True)`: see
+    DoubleGraspPlanner.patiently), every contact motion of theirs having been made."""
     allowed = STRATEGIES[p.strategy]
     out = Attempt()
     removed = ruled_out(dg, configs[0] if configs else None, placements, allowed)
@@ -136,19 +138,23 @@ def plan_sequences(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: G
     popped, chosen, planning = 0, None, 0.0
     done: set[str] = set()  # the handover, once its double grasps are tried
 
-    def attempt(seq: Sequence) -> bool:
+    stalled: list[Sequence] = []  # those that failed at a transit, in the order tried
+
+    def attempt(seq: Sequence, patient: bool = False) -> bool:
         """Plan the sequence; whether it moved."""
         nonlocal chosen, planning
-        name = seq.strategy
+        name, again = seq.strategy, " again, patiently" if patient else ""
         progress(sum(map(len, tried.values())) / sum(budget[s] for s in allowed),
-                 f"{name} sequence {len(tried[name]) + 1} ({seq.seconds:.1f} s estimated)")
-        planner, t = make(), time.perf_counter()
+                 f"{name} sequence {len(tried[name]) + 1} ({seq.seconds:.1f} s estimated){again}")
+        planner, t = make(patient), time.perf_counter()
         try:
             pieces = _plan(planner, seq, pick, place, dg, placements)
         except PieceFailed as exc:
-            tried[name].append(f"{_describe(seq, placements)}: {exc}")
+            tried[name].append(f"{_describe(seq, placements)}{again}: {exc}")
             out.tried.append(tried[name][-1])
             skips.failed(seq, exc)
+            if exc.part == TRANSIT_PARTS[0] and not patient:
+                stalled.append(seq)
             return False
         finally:
             planning += time.perf_counter() - t
@@ -171,6 +177,9 @@ def plan_sequences(make: Callable[[], DoubleGraspPlanner], scene: Scene, pick: G
         if name in done or len(tried[name]) >= budget[name] or skips.skip(seq):
             continue
         if attempt(seq):
+            break
+    for seq in stalled[: p.patient_sequences] if chosen is None else ():
+        if attempt(seq, patient=True):
             break
     made = graph.made if graph else {}
     dropped = "; ".join(f"{n} {why}" for why, n in sorted(search.dropped.items()))
