@@ -32,6 +32,7 @@ from planner.core.stages import StageLog
 from planner.core.steps import Progress, Step, StepContext, StepOutput, no_progress
 from planner.handover.reach import reach
 from planner.model.environment import Obstacle
+from planner.model.geometry import heading, rotation_angle
 from planner.model.task import Scene
 
 UPRIGHT = 0.999  # a box whose z axis is this near the world's vertical has a horizontal top face
@@ -93,10 +94,9 @@ def resting_poses(scene: Scene, min_probability: float) -> tuple[list[np.ndarray
         T[:3, 3] -= [com[0], com[1], low]
         out.append(T)
         kept.append(float(p))
-    turn = scene.object_final[:3, :3] @ scene.object_initial[:3, :3].T  # about the vertical when on the same face
     extra = []
-    if np.dot(down(scene.object_initial), down(scene.object_final)) > UPRIGHT:
-        angle = float(np.arctan2(turn[1, 0], turn[0, 0]))
+    if np.dot(down(scene.object_initial), down(scene.object_final)) > UPRIGHT:  # on one face: turned about the vertical
+        angle = heading(scene.object_final[:3, :3] @ scene.object_initial[:3, :3].T)
         extra = [a for a in (angle, angle / 2) if abs(angle) > 1e-6]
     return out, kept, extra
 
@@ -190,7 +190,7 @@ def _way(T: np.ndarray, ends: tuple[np.ndarray, np.ndarray], com: np.ndarray, tu
     turned; how much farther it is from one end than from the other), in whole centimetres: positions of a grid row
     along the way tie on the first, and the second puts the middle one first."""
     d = [float(np.linalg.norm(T[:3, :3] @ com + T[:3, 3] - (E[:3, :3] @ com + E[:3, 3]))) for E in ends]
-    turned = sum(float(np.arccos(np.clip((np.trace(T[:3, :3].T @ E[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))) for E in ends)
+    turned = sum(rotation_angle(T, E) for E in ends)
     return round(sum(d) + turn * turned, 2), round(abs(d[0] - d[1]), 2)
 
 

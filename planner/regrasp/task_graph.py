@@ -24,6 +24,7 @@ from planner.grasping.grasp_list import GraspList
 from planner.handover.config_score import ConfigScorer
 from planner.handover.double_grasps import DoubleGrasps
 from planner.handover.grasp_configs import ConfigSampler, GraspConfigParams, GraspConfigs
+from planner.model.geometry import rotation_angle
 from planner.model.task import Scene
 from planner.regrasp.graph import FINAL, GOAL, HANDOVER, INITIAL, REGRASP, START, TABLE, Edge, Node, Transition
 from planner.regrasp.placements import Placements
@@ -48,8 +49,7 @@ SAME_GRASP = (0.03, 0.35)  # m, rad: palm poses in the object's frame nearer tha
 
 def same_grasp(a: np.ndarray, b: np.ndarray) -> bool:
     """Whether two palm poses in the object's frame are one grasp (SAME_GRASP)."""
-    cos = (np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0
-    return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < SAME_GRASP[0] and np.arccos(np.clip(cos, -1.0, 1.0)) < SAME_GRASP[1])
+    return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < SAME_GRASP[0] and rotation_angle(a, b) < SAME_GRASP[1])
 
 
 class TaskGraph:
