@@ -9,11 +9,14 @@ from planner.cli.bench import MotionBench
 from planner.motion import PHASE_SECONDS, PHASES
 
 
+SEARCH = [7.0, 6.5]  # the sequence search's stages, after the timing's seconds (wall time over the phases' work)
+
+
 def _run(seed: int, seconds: float, checks: int, success: bool = True) -> dict:
     """One seed's record as bench_motion keeps it: every phase done, `checks` transit checks in each."""
     phases = [{"phase": name, "nodes_planning": 2, "nodes_validating": 0, "edges_invalidated": 1, "rrt_calls": 0,
                "searches": 1, "transit_checks": checks, "path_length": 1.0, "duration": 2.0} for name in PHASES]
-    per_phase = [seconds / (len(PHASES) * len(PHASE_SECONDS) + 1)] * (len(PHASES) * len(PHASE_SECONDS)) + [0.0]
+    per_phase = [seconds / (len(PHASES) * len(PHASE_SECONDS) + 1)] * (len(PHASES) * len(PHASE_SECONDS)) + [0.0] + SEARCH
     return {"seed": seed, "seconds": seconds, "success": success, "double_grasp": 0, "phases": phases,
             "phase_seconds": per_phase, "phases_done": len(PHASES) if success else 0, "failure": "" if success else "x"}
 
@@ -43,7 +46,7 @@ def _timed(seed: int, transit: float, other: float, pairs: int) -> dict:
     and `other` in contact motions and timing, with `pairs` narrow-phase pair tests in each phase's transits."""
     run = _run(seed, transit + other, 0)
     per = len(PHASE_SECONDS)
-    seconds = [0.0] * (len(PHASES) * per) + [other / 2]
+    seconds = [0.0] * (len(PHASES) * per) + [other / 2] + SEARCH
     for i in range(len(PHASES)):
         seconds[per * i: per * i + 4] = [transit / (4 * len(PHASES))] * 4
         seconds[per * i + 4] = other / (2 * len(PHASES))
@@ -65,3 +68,12 @@ def test_transit_speedup_is_the_median_of_per_seed_ratios_and_pair_tests_are_med
     text = MotionBench([0, 1, 2], runs).render()
     assert "transit speedup (median over seeds of RRTConnect's transit seconds / ours): 3.00" in text
     json.dumps(d)
+
+
+def test_where_the_time_goes_reads_the_timing_after_the_phases_not_the_search_stages_after_it():
+    runs = {"roadmap": [_timed(0, 1.0, 0.4, 10), _timed(1, 1.0, 0.6, 10), _timed(2, 1.0, 0.8, 10)],
+            "rrt": [_timed(0, 2.0, 0.5, 50)] * 3}
+    where = MotionBench([0, 1, 2], runs).where("roadmap")
+    assert abs(where["timing and sampling"] - 0.3) < 1e-9  # the median of 0.2, 0.3, 0.4: never the search's 6.5
+    assert abs(where["contact motions"] - 0.3) < 1e-9 and abs(where["graph search"] - 0.25) < 1e-9
+    assert abs(where["other"]) < 1e-9  # each run's seconds are its phases' and its timing's

@@ -163,10 +163,10 @@ class MotionBench:
             phases.append({"phase": name, "success": len(ok) / len(runs),
                            "nodes_planning": _median([r["nodes_planning"] for r in rows]),
                            "nodes_validating": _median([r["nodes_validating"] for r in rows]),
-                           "seconds_planning": _median([r["phase_seconds"][per * i] for r in runs if r["phase_seconds"]]),
-                           "seconds_validating": _median([r["phase_seconds"][per * i + 1] for r in runs if r["phase_seconds"]]),
-                           "seconds_reconnecting": _median([r["phase_seconds"][per * i + 2] for r in runs if r["phase_seconds"]]),
-                           "seconds": _median([sum(r["phase_seconds"][per * i: per * (i + 1)]) for r in runs if r["phase_seconds"]]),
+                           "seconds_planning": _median([r["phase_seconds"][per * i] for r in runs if r["phases"]]),
+                           "seconds_validating": _median([r["phase_seconds"][per * i + 1] for r in runs if r["phases"]]),
+                           "seconds_reconnecting": _median([r["phase_seconds"][per * i + 2] for r in runs if r["phases"]]),
+                           "seconds": _median([sum(r["phase_seconds"][per * i: per * (i + 1)]) for r in runs if r["phases"]]),
                            "edges_invalidated": _median([r["edges_invalidated"] for r in rows]),
                            "rrt_calls": _median([r["rrt_calls"] for r in rows]),
                            "transit_checks": _median([r["transit_checks"] for r in rows]),
@@ -176,7 +176,7 @@ class MotionBench:
                            "straight_distance": _median([r.get("straight_distance", np.nan) for r in rows]),
                            "duration": _median([r["duration"] for r in rows])})
         return {"seconds": _median([r["seconds"] for r in runs]), "success": sum(r["success"] for r in runs) / len(runs),
-                "transit_seconds": _median([_transit_seconds(r) for r in runs if r["phase_seconds"]]),
+                "transit_seconds": _median([_transit_seconds(r) for r in runs if r["phases"]]),
                 "pair_tests": _median([_pair_tests(r) for r in runs if r["phases"]]),
                 "duration": _median([sum(p["duration"] for p in r["phases"]) for r in runs if r["success"]]),
                 "transit_checks": _median([sum(p["transit_checks"] for p in r["phases"]) for r in runs if r["phases"]]),
@@ -186,7 +186,7 @@ class MotionBench:
         """The median over the seeds both planners ran of RRTConnect's transit seconds over ours (a ratio per seed: the
         two ran back to back, so a busy minute slows both)."""
         ratios = [_transit_seconds(b) / _transit_seconds(a) for a, b in zip(self.runs["roadmap"], self.runs["rrt"])
-                  if a["phase_seconds"] and b["phase_seconds"] and _transit_seconds(a) > 0]
+                  if a["phases"] and b["phases"] and _transit_seconds(a) > 0]
         return _median(ratios) if ratios else None
 
     def per_seed(self) -> list[dict]:
@@ -206,13 +206,13 @@ class MotionBench:
         kinds, per = ("graph search", "validation", "RRT", "shortcutting", "contact motions"), len(PHASE_SECONDS)
         rows = {k: [] for k in (*kinds, "timing and sampling", "other")}
         for r in self.runs[planner]:
-            sec = r["phase_seconds"]
-            if not sec:
+            sec, n = r["phase_seconds"], len(r["phases"])
+            if not sec or not n:
                 continue
             for j, kind in enumerate(kinds):
-                rows[kind].append(sum(sec[per * i + j] for i in range(len(sec) // per)))
-            rows["timing and sampling"].append(sec[-1])
-            rows["other"].append(r["seconds"] - sum(sec))
+                rows[kind].append(sum(sec[per * i + j] for i in range(n)))
+            rows["timing and sampling"].append(sec[per * n])  # after it, the sequence search's stages (wall time, overlapping)
+            rows["other"].append(r["seconds"] - sum(sec[: per * n + 1]))
         return {k: _median(v) for k, v in rows.items()}
 
     def render(self) -> str:
@@ -261,7 +261,7 @@ def _transit_seconds(run: dict) -> float:
     from planner.motion import PHASE_SECONDS
 
     per, sec = len(PHASE_SECONDS), run["phase_seconds"]
-    return float(sum(sum(sec[per * i: per * i + TRANSIT_KINDS]) for i in range(len(sec) // per)))
+    return float(sum(sum(sec[per * i: per * i + TRANSIT_KINDS]) for i in range(len(run["phases"]))))
 
 
 def _pair_tests(run: dict) -> int:
