@@ -63,21 +63,24 @@ def approach_direction(robot: Robot, arm: str) -> np.ndarray:
 def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, offset: np.ndarray,
                    iterations: int = 150, tol: float = 1e-3) -> np.ndarray:
     """Damped least squares on torso + arm joints moving the point `offset` of the palm frame to `target` from q0."""
-    fid = robot.frame_id(robot.palm_frame(arm))
+    model, fid = robot.model, robot.frame_id(robot.palm_frame(arm))
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
-    data = robot.model.createData()
+    lower, upper = robot.lower[idx], robot.upper[idx]
+    data = model.createData()
+    damping = 1e-3 * np.eye(3)
     q = q0.copy()
-    for _ in range(iterations):
-        pin.forwardKinematics(robot.model, data, q)
-        pin.updateFramePlacement(robot.model, data, fid)
+    for _ in range(iterations):  # the operations of np.cross and np.clip written out (most of an iteration was their overhead)
+        pin.forwardKinematics(model, data, q)
+        pin.updateFramePlacement(model, data, fid)
         M = data.oMf[fid]
         err = target - M.act(offset)
         if np.linalg.norm(err) < tol:
             break
-        J6 = pin.computeFrameJacobian(robot.model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
-        J = J6[:3, idx] - np.cross(M.rotation @ offset, J6[3:, idx].T).T
-        dq = J.T @ np.linalg.solve(J @ J.T + 1e-3 * np.eye(3), err)
-        q[idx] = np.clip(q[idx] + np.clip(dq, -0.3, 0.3), robot.lower[idx], robot.upper[idx])
+        J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:, idx]
+        p, w = M.rotation @ offset, J6[3:]
+        J = J6[:3] - np.stack([p[1] * w[2] - p[2] * w[1], p[2] * w[0] - p[0] * w[2], p[0] * w[1] - p[1] * w[0]], axis=1).T  # p x w
+        dq = J.T @ np.linalg.solve(J @ J.T + damping, err)
+        q[idx] = np.minimum(np.maximum(q[idx] + np.minimum(np.maximum(dq, -0.3), 0.3), lower), upper)
     return q
 
 
