@@ -98,6 +98,14 @@ class CollisionModel:
         return dataclasses.replace(self, subsets={**self.subsets, **extra})
 
 
+def moved_by_fingers(robot: Robot, objects, arm: str) -> np.ndarray:
+    """Indices, among the robot geometries `objects`, of those moved by an arm's finger joints."""
+    model = robot.model
+    fingers = set(robot.hand_idx[arm].tolist())
+    return np.array([g for g, o in enumerate(objects) if o.parentJoint > 0 and model.joints[o.parentJoint].idx_q in fingers],
+                    dtype=np.int64)
+
+
 def build_collision_model(robot: Robot, environment: Environment = (), params: CollisionParams = CollisionParams(),
                           use_cache: bool = True) -> CollisionModel:
     """Simplify the robot, choose its pairs (cached), add the obstacles and index the subsets."""
@@ -125,6 +133,8 @@ def build_collision_model(robot: Robot, environment: Environment = (), params: C
     for arm in robot.spec.arm_names:
         mine = (pa == arm) | (pb == arm) | (pa == f"{arm}_hand") | (pb == f"{arm}_hand")
         subsets[arm] = k[mine]
+        fingers = np.isin(np.arange(len(gm.geometryObjects)), moved_by_fingers(robot, gm.geometryObjects[:n_robot], arm))
+        subsets[f"{arm}_no_fingers"] = k[mine & ~fingers[first] & ~fingers[second]]  # reach: open fingers may touch
         subsets[f"{arm}_env"] = k[mine & (k >= n_self)]
         subsets[f"{arm}_hand"] = k[(pa == f"{arm}_hand") | (pb == f"{arm}_hand")]
     hands = [f"{a}_hand" for a in robot.spec.arm_names]

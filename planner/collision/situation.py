@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planner.collision.checker import CollisionModel
+from planner.collision.checker import CollisionModel, moved_by_fingers
 from planner.collision.shapes import Geometry
 from planner.collision.with_object import OBJECT_PAIRS, moving_geometries, with_object
 
@@ -59,10 +59,7 @@ def fingertip_geometries(cm: CollisionModel, arm: str, fingers: list[str]) -> tu
 
 def finger_geometries(cm: CollisionModel, arm: str) -> np.ndarray:
     """Indices of the robot geometries moved by an arm's finger joints."""
-    model = cm.robot.model
-    fingers = set(cm.robot.hand_idx[arm].tolist())
-    return np.array([g for g, o in enumerate(cm.geometry.geometryObjects[: cm.n_robot_geoms])
-                     if o.parentJoint > 0 and model.joints[o.parentJoint].idx_q in fingers], dtype=np.int64)
+    return moved_by_fingers(cm.robot, cm.geometry.geometryObjects[: cm.n_robot_geoms], arm)
 
 
 def situation_model(cm: CollisionModel, shape: Geometry, situation: Situation,

@@ -16,7 +16,7 @@ import pinocchio as pin
 
 from planner.collision.checker import CollisionChecker
 from planner.core.steps import Progress, no_progress
-from planner.model.robot import Robot, joint_at
+from planner.model.robot import Robot
 from planner.model.task import Scene
 
 REACH_SEED = 0  # reachability is a property of the task: `check` and the arms step draw the same starts
@@ -84,19 +84,12 @@ def solve_position(robot: Robot, arm: str, target: np.ndarray, q0: np.ndarray, o
     return q
 
 
-def finger_geometries(robot: Robot, checker: CollisionChecker, arm: str) -> frozenset[str]:
-    """Names of the collision geometries the fingers of an arm's hand carry."""
-    joints = {joint_at(robot.model, int(i)) for i in robot.hand_idx[arm]}
-    return frozenset(o.name for o in checker.cm.geometry.geometryObjects if o.parentJoint in joints)
-
-
 def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray, rng: np.random.Generator,
           seeds: int = 32, tolerance: float = 0.02) -> ReachResult:
     """Try `seeds` starts (rest first, then random torso+arm); reachable if one ends within tolerance, collision-free."""
     idx = np.concatenate([robot.torso_idx, robot.arm_idx[arm]])
     offset = fingertip_centre(robot, arm)
     data = robot.model.createData()
-    fingers = finger_geometries(robot, checker, arm)
     best, closest, collided = np.inf, robot.q_rest, False
     for s in range(seeds):
         q0 = robot.q_rest.copy()
@@ -108,7 +101,7 @@ def reach(robot: Robot, checker: CollisionChecker, arm: str, target: np.ndarray,
         if d < best:
             best, closest = d, q
         if d <= tolerance:
-            if not checker.in_collision(q, arm) or not any(fingers.isdisjoint(pair) for pair in checker.colliding_pairs(q, arm)):
+            if not checker.in_collision(q, f"{arm}_no_fingers"):
                 return ReachResult(arm, True, d, q)
             collided = True
     return ReachResult(arm, False, best, closest, collided)
