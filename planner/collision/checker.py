@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -98,7 +98,7 @@ class CollisionModel:
         return dataclasses.replace(self, subsets={**self.subsets, **extra})
 
 
-def moved_by_fingers(robot: Robot, objects, arm: str) -> np.ndarray:
+def moved_by_fingers(robot: Robot, objects: Sequence[pin.GeometryObject], arm: str) -> np.ndarray:
     """Indices, among the robot geometries `objects`, of those moved by an arm's finger joints."""
     model = robot.model
     fingers = set(robot.hand_idx[arm].tolist())
