@@ -119,13 +119,12 @@ def test_killed_plan_resumes_to_the_same_result(planned, tmp_path):
     """`plan default --seed 3` killed once grasp_configs is saved, then resumed: the same step files and records as the
     run in one go (`planned`, which a whole `regrasp plan` run matches byte for byte: see the warm-cache test)."""
     whole, _ = planned
-    outcome = 0
     cut = tmp_path / "cut"
     assert _plan(cut, kill_after="grasp_configs").returncode == -signal.SIGKILL
     names = [s.name for s in PIPELINE]
     assert Session.open(cut).finished() == names[: names.index("grasp_configs") + 1]  # what was finished is readable
     resumed = _plan(cut, "--resume")
-    assert resumed.returncode == outcome, resumed.stderr
+    assert resumed.returncode == 0, resumed.stderr
     assert _step_files(cut) == _step_files(whole)
     # the records but their seconds and whether a result came from the cache (the other run may have filled it)
     strip = lambda m: [{k: v for k, v in r.items() if k not in ("seconds", "stage_seconds", "cached")} for r in m["steps"]]
