@@ -8,7 +8,6 @@ import json
 from planner.cli.bench import MotionBench
 from planner.motion import PHASE_SECONDS, PHASES
 
-
 SEARCH = [7.0, 6.5]  # the sequence search's stages, after the timing's seconds (wall time over the phases' work)
 
 
