@@ -65,7 +65,26 @@ def test_transit_speedup_is_the_median_of_per_seed_ratios_and_pair_tests_are_med
     assert [row["ours_pair_tests"] for row in d["per_seed"]] == [40, 120, 80]
     assert abs(d["per_seed"][1]["rrt_transit_seconds"] - 5.0) < 1e-9
     text = MotionBench([0, 1, 2], runs).render()
-    assert "transit speedup (median over seeds of RRTConnect's transit seconds / ours): 3.00" in text
+    assert "transit speedup (median over ours' runs of RRTConnect's transit seconds, same seed, / ours): 3.00" in text
+    json.dumps(d)
+
+
+def test_on_several_roadmaps_each_run_of_ours_is_paired_with_rrtconnect_on_its_seed():
+    # ours on roadmaps 0 and 1 for seeds 0 and 1, RRTConnect once per seed (it uses no roadmap): the ratios are
+    # 2/1, 5/1 on roadmap 0 and 2/4, 5/20 on roadmap 1, median 1.25 (pairing runs by position would give 3.5)
+    runs = {"roadmap": [{**_timed(0, 1.0, 0.5, 10), "roadmap": 0}, {**_timed(1, 1.0, 0.5, 30), "roadmap": 0},
+                        {**_timed(0, 4.0, 0.5, 50), "roadmap": 1}, {**_timed(1, 20.0, 0.5, 20), "roadmap": 1, "success": False}],
+            "rrt": [{**_timed(0, 2.0, 0.5, 60), "roadmap": None}, {**_timed(1, 5.0, 0.5, 60), "roadmap": None}]}
+    bench = MotionBench([0, 1], runs, roadmaps=2)
+    d = bench.to_dict()
+    assert abs(d["transit_speedup"] - 1.25) < 1e-9
+    assert [(row["seed"], row["roadmap"], row["rrt_transit_seconds"]) for row in d["per_seed"]] == [
+        (0, 0, 2.0), (1, 0, 5.0), (0, 1, 2.0), (1, 1, 5.0)]
+    assert d["ours_pair_tests_median"] == 4 * 25  # over all four runs of ours
+    assert [(r["roadmap"], r["pair_tests"], r["success"]) for r in d["per_roadmap"]] == [(0, 4 * 20, 1.0), (1, 4 * 35, 0.5)]
+    assert d["per_roadmap"][1]["duration"] == 4 * 2.0  # the successful run's
+    text = bench.render()
+    assert "over 2 seeds x 2 roadmaps" in text and "ours per roadmap" in text
     json.dumps(d)
 
 

@@ -11,6 +11,7 @@ import subprocess
 import sys
 
 import pytest
+import sandbox
 
 from planner.cli.arguments import Command, task_argument
 from planner.cli.progress import Bars
@@ -76,6 +77,27 @@ def test_bench_collision_json(tmp_path):
         assert key in figures
     assert figures["dof"] == 49 and figures["pairs_kept"] > 1000
     assert "median µs" in run.stdout
+
+
+@pytest.mark.slow  # about 35 s from an empty cache: grasp lists, two 4-node roadmaps, three motions
+def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
+    out = tmp_path / "motion.json"
+    run = sandbox.regrasp("bench", "motion", "--seeds", "1", "--roadmaps", "2", "--set", "roadmap.nodes=4",
+                          "--set", "roadmap.task_nodes=0", "--json", str(out), REGRASP_CACHE=str(tmp_path / "cache"))
+    assert run.returncode == 0, run.stderr
+    figures = json.loads(out.read_text())
+    assert figures["roadmaps"] == 2 and [r["roadmap"] for r in figures["per_roadmap"]] == [0, 1]
+    assert [(r["seed"], r["roadmap"]) for r in figures["runs"]["roadmap"]] == [(0, 0), (0, 1)]
+    assert [(r["seed"], r["roadmap"]) for r in figures["runs"]["rrt"]] == [(0, None)]
+    assert figures["ours_success"] == 1.0 and figures["rrt_success"] == 1.0
+    assert all(r["pair_tests"] > 0 and r["duration"] > 0 for r in figures["per_roadmap"])
+    assert "ours per roadmap" in run.stdout and "the roadmap of session seed 1" in run.stderr
+
+
+def test_bench_motion_refuses_to_set_what_it_compares():
+    run = regrasp("bench", "motion", "--seeds", "1", "--set", "motion.planner=rrt")
+    assert run.returncode == 2 and run.stderr.strip().splitlines() == [
+        "error: --set: bench motion sets motion.planner itself (it compares the planners on the handover)"]
 
 
 # ---------------------------------------------------------------------------------------------

@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import pinocchio as pin
 
 from planner.collision.checker import build_collision_model
+from planner.core.errors import RegraspError
 from planner.model.task import Scene
 
 
@@ -134,10 +135,11 @@ class MotionBench:
     runs: dict  # planner -> per seed: {"seconds", "success", "double_grasp", "phases": Table I rows, "phase_seconds"}
     check_us: tuple[float, float] = (float("nan"), float("nan"))  # a full check's median µs before and after the runs
     repeat: int = 1  # runs per seed and planner, the fastest kept
+    roadmaps: int = 1  # ours ran on the roadmaps of session seeds 0..roadmaps-1 (RRTConnect alone once per seed)
 
     def to_dict(self) -> dict:
         ours, rrt = (self.summary(p) for p in ("roadmap", "rrt"))
-        return {"seeds": self.seeds, "repeat": self.repeat,
+        return {"seeds": self.seeds, "repeat": self.repeat, "roadmaps": self.roadmaps, "per_roadmap": self.per_roadmap(),
                 "ours_total_seconds_median": ours["seconds"], "rrt_total_seconds_median": rrt["seconds"],
                 "speedup": rrt["seconds"] / ours["seconds"] if ours["seconds"] > 0 else None,
                 "ours_transit_checks_median": ours["transit_checks"], "rrt_transit_checks_median": rrt["transit_checks"],
@@ -185,17 +187,34 @@ class MotionBench:
     def transit_speedup(self) -> float | None:
         """The median over the seeds both planners ran of RRTConnect's transit seconds over ours (a ratio per seed: the
         two ran back to back, so a busy minute slows both)."""
-        ratios = [_transit_seconds(b) / _transit_seconds(a) for a, b in zip(self.runs["roadmap"], self.runs["rrt"])
+        ratios = [_transit_seconds(b) / _transit_seconds(a) for a, b in self._pairs()
                   if a["phases"] and b["phases"] and _transit_seconds(a) > 0]
         return _median(ratios) if ratios else None
 
+    def _pairs(self) -> list[tuple[dict, dict]]:
+        """(ours, RRTConnect's) of each run of ours, with RRTConnect's run of the same seed."""
+        rrt = {b["seed"]: b for b in self.runs["rrt"]}
+        return [(a, rrt[a["seed"]]) for a in self.runs["roadmap"] if a["seed"] in rrt]
+
     def per_seed(self) -> list[dict]:
-        """Per seed both planners ran: the step's seconds, its transits' seconds and their pair tests, for each."""
-        return [{"seed": a["seed"], "ours_seconds": a["seconds"], "rrt_seconds": b["seconds"],
+        """Per run of ours (a seed, on a roadmap) and RRTConnect's of the same seed: the step's seconds, its transits'
+        seconds and their pair tests, for each."""
+        return [{"seed": a["seed"], "roadmap": a.get("roadmap", 0), "ours_seconds": a["seconds"], "rrt_seconds": b["seconds"],
                  "ours_transit_seconds": _transit_seconds(a), "rrt_transit_seconds": _transit_seconds(b),
                  "ours_pair_tests": _pair_tests(a), "rrt_pair_tests": _pair_tests(b),
                  "ours_success": a["success"], "rrt_success": b["success"]}
-                for a, b in zip(self.runs["roadmap"], self.runs["rrt"])]
+                for a, b in self._pairs()]
+
+    def per_roadmap(self) -> list[dict]:
+        """Per roadmap, ours' medians over the seeds: pair tests, transit seconds, the motion's duration, and success."""
+        out = []
+        for r in range(self.roadmaps):
+            runs = [a for a in self.runs["roadmap"] if a.get("roadmap", 0) == r]
+            out.append({"roadmap": r, "pair_tests": _median([_pair_tests(a) for a in runs if a["phases"]]),
+                        "transit_seconds": _median([_transit_seconds(a) for a in runs if a["phases"]]),
+                        "duration": _median([sum(p["duration"] for p in a["phases"]) for a in runs if a["success"]]),
+                        "success": sum(a["success"] for a in runs) / len(runs) if runs else float("nan")})
+        return out
 
     def where(self, planner: str) -> dict:
         """Medians over the seeds of the seconds spent in each kind of work, summed over the phases of the motion found
@@ -220,7 +239,8 @@ class MotionBench:
         for planner, title in (("roadmap", "ours: Super Graph, lazy revalidation, RRT reconnection"), ("rrt", "RRTConnect alone")):
             s = self.summary(planner)
             fastest = f" (the fastest of {self.repeat} runs each)" if self.repeat > 1 else ""
-            out += [f"{title}: median {s['seconds']:.2f} s over {len(self.seeds)} seeds{fastest}, success {s['success']:.0%}, "
+            on = f" x {self.roadmaps} roadmaps" if planner == "roadmap" and self.roadmaps > 1 else ""
+            out += [f"{title}: median {s['seconds']:.2f} s over {len(self.seeds)} seeds{on}{fastest}, success {s['success']:.0%}, "
                     f"{s['transit_checks']:.0f} transit collision checks, motion {s['duration']:.2f} s long",
                     f"{'phase':<7}{'nodes plan':>11}{'s plan':>8}{'nodes val':>10}{'s val':>8}{'invalid':>8}{'RRT':>5}"
                     f"{'checks':>8}{'pairs':>9}{'smooth':>8}{'s total':>9}{'success':>8}{'length':>8}{'straight':>9}{'duration':>9}"]
@@ -232,10 +252,17 @@ class MotionBench:
             out.append("where the time goes (median s): " + ", ".join(f"{k} {v:.2f}" for k, v in s["where"].items())
                        + " (other: the wall time minus the rest; below 0 when the phases' transits ran in parallel)")
             out.append("")
-        out += [f"{'seed':<6}{'transit s ours':>15}{'RRTConnect':>11}{'ratio':>7}{'pair tests ours':>16}{'RRTConnect':>11}"
+        if self.roadmaps > 1:
+            out.append(f"ours per roadmap (session seed's roadmap; medians over {len(self.seeds)} seeds):")
+            out.append(f"{'roadmap':<8}{'pair tests':>11}{'transit s':>10}{'duration':>9}{'success':>8}")
+            for row in self.per_roadmap():
+                out.append(f"{row['roadmap']:<8}{row['pair_tests']:>11.0f}{row['transit_seconds']:>10.2f}{row['duration']:>9.2f}"
+                           f"{row['success']:>8.0%}")
+            out.append("")
+        out += [f"{'seed':<6}{'roadmap':>8}{'transit s ours':>15}{'RRTConnect':>11}{'ratio':>7}{'pair tests ours':>16}{'RRTConnect':>11}"
                 f"{'ratio':>7}{'step s ours':>12}{'RRTConnect':>11}"]
         for row in self.per_seed():
-            out.append(f"{row['seed']:<6}{row['ours_transit_seconds']:>15.2f}{row['rrt_transit_seconds']:>11.2f}"
+            out.append(f"{row['seed']:<6}{row['roadmap']:>8}{row['ours_transit_seconds']:>15.2f}{row['rrt_transit_seconds']:>11.2f}"
                        f"{_ratio(row['rrt_transit_seconds'], row['ours_transit_seconds']):>7.2f}{row['ours_pair_tests']:>16}"
                        f"{row['rrt_pair_tests']:>11}{_ratio(row['rrt_pair_tests'], row['ours_pair_tests']):>7.2f}"
                        f"{row['ours_seconds']:>12.2f}{row['rrt_seconds']:>11.2f}")
@@ -243,7 +270,8 @@ class MotionBench:
         d = self.to_dict()
         out.append(f"speedup (RRTConnect median / ours): {d['speedup']:.2f}" if d["speedup"] else "speedup: n/a")
         if d["transit_speedup"]:
-            out.append(f"transit speedup (median over seeds of RRTConnect's transit seconds / ours): {d['transit_speedup']:.2f}")
+            out.append("transit speedup (median over ours' runs of RRTConnect's transit seconds, same seed, / ours): "
+                       f"{d['transit_speedup']:.2f}")
         if d["pair_test_ratio"]:
             out.append(f"transit pair tests (RRTConnect median / ours): {d['pair_test_ratio']:.2f} (a count: the same on any machine)")
         if d["check_ratio"]:
@@ -281,43 +309,58 @@ def _median(values: list) -> float:
 CHECK_SAMPLES = 500  # configurations a motion benchmark times a full check at, before and after its runs
 
 
-def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int = 1) -> MotionBench:
+def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int = 1, roadmaps: int = 1,
+                 params: dict | None = None) -> MotionBench:
     """The offline steps once (seed 0, from the cache when there); per seed the online steps, then the motion planned with
     the Super Graph and with RRTConnect alone from the same double grasps (rank order and contact motions are shared),
-    `repeat` times each, the fastest run kept (the same seed gives the same motion: only its time varies)."""
+    `repeat` times each, the fastest run kept (the same seed gives the same motion: only its time varies). `roadmaps` K:
+    ours on the roadmaps sessions 0..K-1 build (one roadmap's seed moves ours' figures as much as a change may), RRTConnect
+    alone once per seed (it uses no roadmap). `params`: step -> parameter overrides (`--set`), for every run."""
     from planner.core.runner import run_pipeline
     from planner.core.session import Session
     from planner.core.steps import StepContext, step_seed
-    from planner.motion import PHASES, MotionParams, plan_motion
-    from planner.pipeline import step_named
+    from planner.motion import PHASES, plan_motion
+    from planner.pipeline import PIPELINE, step_named
+    from planner.roadmap.step import roadmap_for, session_roadmap_seed
 
+    params = params or {}
+    chosen = {"planner", "strategy"} & set(params.get("motion", {}))
+    if chosen:
+        raise RegraspError(f"--set: bench motion sets motion.{' and motion.'.join(sorted(chosen))} itself (it compares the planners "
+                         "on the handover)")
+    made = {step.name: step.make_params(params.get(step.name)) for step in PIPELINE}
     base = Session.create(folder / "base", scene, 0)
     progress("offline steps: grasp lists and roadmap (from the user cache when computed before) ...")
-    run_pipeline(base, until="roadmap")
-    offline = {name: base.result(name) for name in ("arms", "pick_grasps", "place_grasps", "roadmap")}
+    run_pipeline(base, until="roadmap", params=params)
+    offline = {name: base.result(name) for name in ("arms", "pick_grasps", "place_grasps")}
+    graphs = [base.result("roadmap")]
+    for r in range(1, roadmaps):
+        progress(f"the roadmap of session seed {r} (from the user cache when built before) ...")
+        graphs.append(roadmap_for(scene, made["roadmap"], session_roadmap_seed(r))[0])
     runs: dict = {"roadmap": [], "rrt": []}
     before = bench_collision(scene, CHECK_SAMPLES).full_check_us_median
     for seed in range(seeds):
-        results = dict(offline)
+        results = {**offline, "roadmap": graphs[0]}
         for name in ONLINE_STEPS:
             step = step_named(name)
-            ctx = StepContext(scene, {n: results[n] for n in step.needs}, {n: step_named(n).make_params() for n in step.needs},
-                              step.make_params(), np.random.default_rng(step_seed(seed, name)))
+            ctx = StepContext(scene, {n: results[n] for n in step.needs}, {n: made[n] for n in step.needs},
+                              made[name], np.random.default_rng(step_seed(seed, name)))
             results[name] = step.run(ctx).result
-        for planner in runs:
+        for planner, r in [("roadmap", r) for r in range(roadmaps)] + [("rrt", None)]:
             timed = []
             for _ in range(repeat):
                 start = time.perf_counter()
                 motion, seconds = plan_motion(scene, results["pick_grasps"], results["place_grasps"], results["double_grasps"],
-                                              results["roadmap"], MotionParams(planner=planner, strategy="handover"),
+                                              graphs[r or 0], replace(made["motion"], planner=planner, strategy="handover"),
                                               np.random.default_rng(step_seed(seed, "motion")),
-                                              configs=(results["grasp_configs"], step_named("grasp_configs").make_params()))
+                                              configs=(results["grasp_configs"], made["grasp_configs"]))
                 timed.append((time.perf_counter() - start, seconds))
             elapsed, seconds = min(timed, key=lambda run: run[0])
             failed = next((why for why in motion.tried if why), "")
             done = len(PHASES) if not motion.failure else next(i for i, n in enumerate(PHASES) if failed.startswith(n))
-            runs[planner].append({"seed": seed, "seconds": elapsed, "success": not motion.failure, "double_grasp": motion.double_grasp,
-                                  "phases": motion.phases, "phase_seconds": seconds, "phases_done": done,
-                                  "failure": motion.failure})
-            progress(f"seed {seed} {planner}: {elapsed:.2f} s, {'ok' if not motion.failure else motion.failure[:120]}")
-    return MotionBench(list(range(seeds)), runs, (before, bench_collision(scene, CHECK_SAMPLES).full_check_us_median), repeat)
+            runs[planner].append({"seed": seed, "roadmap": r, "seconds": elapsed, "success": not motion.failure,
+                                  "double_grasp": motion.double_grasp, "phases": motion.phases, "phase_seconds": seconds,
+                                  "phases_done": done, "failure": motion.failure})
+            on = f" (roadmap {r})" if roadmaps > 1 and r is not None else ""
+            progress(f"seed {seed} {planner}{on}: {elapsed:.2f} s, {'ok' if not motion.failure else motion.failure[:120]}")
+    return MotionBench(list(range(seeds)), runs, (before, bench_collision(scene, CHECK_SAMPLES).full_check_us_median), repeat, roadmaps)

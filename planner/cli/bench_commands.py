@@ -50,8 +50,11 @@ def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
 
 def _cmd_bench_motion(args: argparse.Namespace) -> int:
     from planner.cli.bench import bench_motion
+    from planner.cli.plan import step_params
 
-    return _bench_in_scratch(args, lambda scene, tmp, say: bench_motion(scene, args.seeds, tmp, say, args.repeat))
+    params = step_params(args.set or [])  # a bad --set fails here, before any step runs
+    return _bench_in_scratch(args, lambda scene, tmp, say: bench_motion(scene, args.seeds, tmp, say, args.repeat, args.roadmaps,
+                                                                        params))
 
 
 def _cmd_bench_grasps(args: argparse.Namespace) -> int:
@@ -93,6 +96,11 @@ def add_bench(line: CommandLine) -> None:
     bm.add("--repeat", type=positive_int, default=1, metavar="K",
            help="plan each seed K times and keep its fastest run (the motion is the same each time; on a busy "
                 "machine the fastest is the steadiest figure)")
+    bm.add("--roadmaps", type=positive_int, default=1, metavar="K",
+           help="plan ours on the roadmaps of session seeds 0..K-1 (each built once, then cached): one roadmap's seed moves "
+                "ours' figures as much as a change may")
+    bm.add("--set", action="append", metavar="STEP.PARAM=VALUE",
+           help="a step parameter for every run (repeatable; `regrasp params` lists them; not motion.planner or motion.strategy)")
     add_json(bm, "the figures")
     bg = line.command("grasps", "each hand's grasp list: frames left per stage, grasps, seconds, grasps per second, and the "
                       "ratio to an earlier commit's builder run side by side", _cmd_bench_grasps, within="bench")
