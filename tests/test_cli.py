@@ -79,11 +79,13 @@ def test_bench_collision_json(tmp_path):
     assert "median µs" in run.stdout
 
 
-@pytest.mark.slow  # about 35 s from an empty cache: grasp lists, two 4-node roadmaps, three motions
+@pytest.mark.slow  # about 30 s from an empty cache: grasp lists, two 4-node roadmaps, three motions
 def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
     out = tmp_path / "motion.json"
-    run = sandbox.regrasp("bench", "motion", "--seeds", "1", "--roadmaps", "2", "--set", "roadmap.nodes=4",
-                          "--set", "roadmap.task_nodes=0", "--json", str(out), REGRASP_CACHE=str(tmp_path / "cache"))
+    small = ("roadmap.nodes=4", "roadmap.task_nodes=0", "pick_grasps.orientations=40", "place_grasps.orientations=40",
+             "motion.smooth_checks=2000")
+    run = sandbox.regrasp("bench", "motion", "--seeds", "1", "--roadmaps", "2", *(a for s in small for a in ("--set", s)),
+                          "--json", str(out), REGRASP_CACHE=str(tmp_path / "cache"))
     assert run.returncode == 0, run.stderr
     figures = json.loads(out.read_text())
     assert figures["roadmaps"] == 2 and [r["roadmap"] for r in figures["per_roadmap"]] == [0, 1]
@@ -91,6 +93,8 @@ def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
     assert [(r["seed"], r["roadmap"]) for r in figures["runs"]["rrt"]] == [(0, None)]
     assert figures["ours_success"] == 1.0 and figures["rrt_success"] == 1.0
     assert all(r["pair_tests"] > 0 and r["duration"] > 0 for r in figures["per_roadmap"])
+    for r in figures["runs"]["roadmap"] + figures["runs"]["rrt"]:  # --set reached the motion step (20,000 by default)
+        assert sum(p["smoothing_checks"] for p in r["phases"]) < 3000
     assert "ours per roadmap" in run.stdout and "the roadmap of session seed 1" in run.stderr
 
 

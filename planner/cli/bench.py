@@ -185,8 +185,8 @@ class MotionBench:
                 "phases": phases, "where": self.where(planner)}
 
     def transit_speedup(self) -> float | None:
-        """The median over the seeds both planners ran of RRTConnect's transit seconds over ours (a ratio per seed: the
-        two ran back to back, so a busy minute slows both)."""
+        """The median over ours' runs (seeds, on each roadmap) of RRTConnect's transit seconds on the run's seed over ours
+        (a ratio per run: the two ran in the same minutes, so a busy minute slows both)."""
         ratios = [_transit_seconds(b) / _transit_seconds(a) for a, b in self._pairs()
                   if a["phases"] and b["phases"] and _transit_seconds(a) > 0]
         return _median(ratios) if ratios else None

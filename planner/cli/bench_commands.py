@@ -92,7 +92,7 @@ def add_bench(line: CommandLine) -> None:
     bm = line.command("motion", "Table I: the motion over seeds with the Super Graph and with RRTConnect alone", _cmd_bench_motion,
                       within="bench")
     add_task(bm)
-    bm.add("--seeds", type=positive_int, default=10, help="online seeds 0..N-1 (the grasp lists and roadmap: seed 0, cached)")
+    bm.add("--seeds", type=positive_int, default=10, help="online seeds 0..N-1 (grasp lists and roadmap: seed 0, cached; see --roadmaps)")
     bm.add("--repeat", type=positive_int, default=1, metavar="K",
            help="plan each seed K times and keep its fastest run (the motion is the same each time; on a busy "
                 "machine the fastest is the steadiest figure)")
