@@ -72,13 +72,51 @@ def test_json_is_a_joint_trajectory_with_the_samples_of_motion_npz(written: Path
     assert list(data["keyframes"].values()) == npz["keyframes"].tolist()
 
 
-def test_velocities_are_central_differences_inside_one_sided_at_the_ends(written: Path, npz: dict) -> None:
-    v = np.array([p["velocities"] for p in json.loads((written / "t.json").read_text())["points"]])
+def test_velocities_and_accelerations_are_the_timed_trajectorys(written: Path, npz: dict) -> None:
+    """The stored velocities and accelerations, checked against the positions alone: between two samples dt apart each
+    joint's acceleration stays within +-amax, so q and v move as the first sample's v and a say to within amax dt^2 and
+    2 amax dt (exactly where no breakpoint falls between them); and within the session's limits."""
+    points = json.loads((written / "t.json").read_text())["points"]
+    v, a = np.array([p["velocities"] for p in points]), np.array([p["accelerations"] for p in points])
+    assert np.array_equal(v, npz["qd"]) and np.array_equal(a, npz["qdd"])
+    session = Session.open(EXAMPLE)
+    params = session.record_of("motion")["params"]
+    vmax = np.minimum(session.scene.robot.model.velocityLimit, params["max_velocity"])
+    amax = params["max_acceleration"]
+    assert np.all(np.abs(v) <= vmax * (1 + 1e-9)) and np.all(np.abs(a) <= amax * (1 + 1e-9))
     q, t = npz["q"], npz["t"]
+    dt = t[1:, None] - t[:-1, None]
+    dq = q[1:] - (q[:-1] + v[:-1] * dt + 0.5 * a[:-1] * dt**2)
+    dv = v[1:] - (v[:-1] + a[:-1] * dt)
+    assert np.all(np.abs(dq) <= amax * dt**2 + 1e-9) and np.all(np.abs(dv) <= 2 * amax * dt + 1e-9)
+    exact = (np.abs(dq).max(axis=1) < 1e-9) & (np.abs(dv).max(axis=1) < 1e-9)  # no breakpoint between the two samples
+    assert exact.mean() > 0.6  # 0.68 here; 0.52 or less with accelerations a sample late, velocities a sample late or by
+    # finite differences
+    assert np.allclose(v[1:-1][exact[1:] & exact[:-1]], ((q[2:] - q[:-2]) / (t[2:, None] - t[:-2, None]))[exact[1:] & exact[:-1]],
+                       atol=amax * (t[1] - t[0]))
+    assert not v[0].any() and not v[-1].any()  # at rest at both ends
+
+
+def test_an_older_session_without_them_exports_finite_differences(tmp_path: Path) -> None:
+    """A session saved before the motion stored velocities: central differences inside, one-sided at the ends, and no
+    accelerations (an empty list per point, no CSV columns)."""
+    session = copy_example(tmp_path / "s")
+    with np.load(session / "motion.npz") as z:
+        arrays = {k: z[k] for k in z.files if k not in ("qd", "qdd")}
+    np.savez(session / "motion.npz", **arrays)
+    for name in ("t.json", "t.csv"):
+        run = export(tmp_path, str(session), "--trajectory", name)
+        assert run.returncode == 0, run.stderr
+    points = json.loads((tmp_path / "t.json").read_text())["points"]
+    v = np.array([p["velocities"] for p in points])
+    q, t = arrays["q"], arrays["t"]
     for i in (1, len(t) // 3, 2 * len(t) // 3, len(t) - 2):
         assert np.allclose(v[i], (q[i + 1] - q[i - 1]) / (t[i + 1] - t[i - 1]), atol=1e-9)
     assert np.allclose(v[0], (q[1] - q[0]) / (t[1] - t[0]), atol=1e-9)
     assert np.allclose(v[-1], (q[-1] - q[-2]) / (t[-1] - t[-2]), atol=1e-9)
+    assert all(p["accelerations"] == [] for p in points)
+    header = next(csv.reader((tmp_path / "t.csv").open()))
+    assert not any(h.startswith("acceleration:") for h in header)
 
 
 def test_csv_has_a_header_and_the_samples_of_motion_npz(written: Path, model_joints: list[str], npz: dict) -> None:
@@ -87,10 +125,14 @@ def test_csv_has_a_header_and_the_samples_of_motion_npz(written: Path, model_joi
     assert header[:3] == ["time", "phase", "holder"]
     positions = [i for i, h in enumerate(header) if h.startswith("position:")]
     velocities = [i for i, h in enumerate(header) if h.startswith("velocity:")]
+    accelerations = [i for i, h in enumerate(header) if h.startswith("acceleration:")]
     assert [header[i].removeprefix("position:") for i in positions] == model_joints
     assert [header[i].removeprefix("velocity:") for i in velocities] == model_joints
+    assert [header[i].removeprefix("acceleration:") for i in accelerations] == model_joints
     assert len(body) == len(npz["t"])
     assert np.array_equal(np.array([[float(r[i]) for i in positions] for r in body]), npz["q"])
+    assert np.array_equal(np.array([[float(r[i]) for i in velocities] for r in body]), npz["qd"])
+    assert np.array_equal(np.array([[float(r[i]) for i in accelerations] for r in body]), npz["qdd"])
     assert [float(r[0]) for r in body] == npz["t"].tolist()
     assert [r[1] for r in body] == [PHASES[p] for p in npz["phase"]]
 
@@ -137,3 +179,18 @@ def test_joint_names_are_saved_with_the_motion_and_absent_from_older_files(tmp_p
     save_result(dataclasses.replace(old, joint_names=tuple(model_joints)), tmp_path, "new")
     assert json.loads((tmp_path / "new.json").read_text())["joint_names"] == model_joints
     assert load_result(Motion, tmp_path, "new").joint_names == tuple(model_joints)
+
+
+def test_velocities_are_saved_with_the_motion_and_absent_from_older_files(tmp_path: Path) -> None:
+    """Optional arrays: a motion saves and loads its velocities and accelerations; one without them (an older session's)
+    loads them empty and saves as it was written, without them."""
+    example = load_result(Motion, EXAMPLE, "motion")
+    assert example.qd.shape == example.qdd.shape == example.q.shape
+    save_result(dataclasses.replace(example, qd=np.zeros((0, 0)), qdd=np.zeros((0, 0))), tmp_path, "older")
+    with np.load(tmp_path / "older.npz") as z:
+        assert "qd" not in z.files and "qdd" not in z.files
+    old = load_result(Motion, tmp_path, "older")
+    assert old.qd.size == old.qdd.size == 0 and np.array_equal(old.q, example.q)
+    save_result(example, tmp_path, "new")
+    new = load_result(Motion, tmp_path, "new")
+    assert np.array_equal(new.qd, example.qd) and np.array_equal(new.qdd, example.qdd)

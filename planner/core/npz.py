@@ -7,7 +7,7 @@ import contextlib
 import math
 import zipfile
 import zlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 from pathlib import Path
 from types import TracebackType
 
@@ -119,10 +119,13 @@ class NpzFile:
 
 
 def read_npz(path: Path, declared: dict[str, tuple[np.dtype, Shape]], dims: dict[str, int] | None = None,
-             budget: Budget | None = None) -> dict[str, np.ndarray]:
+             budget: Budget | None = None, optional: Collection[str] = ()) -> dict[str, np.ndarray]:
     """The arrays `declared` (name -> dtype and shape) of an .npz file, every header checked before any data is read;
-    other entries are never read. `dims` fixes (and collects) the named dimensions."""
+    other entries are never read. `dims` fixes (and collects) the named dimensions; an `optional` array the file does
+    not hold is left out of the answer."""
     with NpzFile(path, budget) as npz:
-        for name, (dtype, shape) in declared.items():
-            npz.header(name, dtype, shape, dims)
-        return {name: npz.read(name) for name in declared}
+        held = set(npz.names())
+        wanted = [name for name in declared if name in held or name not in optional]
+        for name in wanted:
+            npz.header(name, *declared[name], dims)
+        return {name: npz.read(name) for name in wanted}

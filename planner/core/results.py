@@ -27,8 +27,15 @@ from planner.core.npz import Budget, read_npz
 R = TypeVar("R")
 
 
-def array(dtype: str, shape: tuple[int | str | None, ...]) -> Any:
-    """Declare a numpy-array field of a result: saved to the .npz and checked on load."""
+def array(dtype: str, shape: tuple[int | str | None, ...], optional: bool = False) -> Any:
+    """Declare a numpy-array field of a result: saved to the .npz and checked on load. `optional`: a field added after
+    results were saved without it, empty (no rows) by default; left out of the .npz while empty, and empty when a file
+    does not hold it."""
+    if optional:
+        empty = np.zeros((0,) * len(shape), dtype=dtype)
+        empty.setflags(write=False)
+        return dataclasses.field(default_factory=lambda: empty, metadata={"dtype": np.dtype(dtype).str, "shape": shape,
+                                                                         "optional": True})
     return dataclasses.field(metadata={"dtype": np.dtype(dtype).str, "shape": shape})
 
 
@@ -124,6 +131,8 @@ def save_result(result: Any, folder: Path, stem: str) -> list[str]:
     for f in dataclasses.fields(result):
         value = getattr(result, f.name)
         if _is_array(f):
+            if f.metadata.get("optional") and not value.size:
+                continue  # as older files have it
             arrays[f.name] = np.ascontiguousarray(value, dtype=np.dtype(f.metadata["dtype"]))
         elif f.default is dataclasses.MISSING or value != f.default:  # a field added later, at its default: as older files have it
             rest[f.name] = value
@@ -224,11 +233,13 @@ def load_result(cls: type[R], folder: Path, stem: str, dims: dict[str, int] | No
     rest = read_json_object(json_path)
     fields = dataclasses.fields(cls)
     declared = {f.name: (np.dtype(f.metadata["dtype"]), f.metadata["shape"]) for f in fields if _is_array(f)}
-    arrays = read_npz(npz_path, declared, dict(dims or {}), budget)
+    optional = {f.name for f in fields if _is_array(f) and f.metadata.get("optional")}
+    arrays = read_npz(npz_path, declared, dict(dims or {}), budget, optional)
     values: dict[str, Any] = {}
     for f in fields:
         if _is_array(f):
-            values[f.name] = _finite(arrays[f.name], npz_path, f.name)
+            if f.name in arrays:
+                values[f.name] = _finite(arrays[f.name], npz_path, f.name)
         else:
             if f.name in rest:
                 values[f.name] = frozen_json(rest[f.name])

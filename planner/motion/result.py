@@ -110,6 +110,10 @@ the names of q's columns;
     intermediate: tuple = ()  # a table handover's or regrasp's intermediate placement: the object's pose, 4 rows of 4 (empty: none)
     sequence: tuple = ()  # the regrasp graph's sequence that moved: per transition {"kind", "hand", "grasps", "grasp", "at",
     # "seconds" (estimated), "double_grasp" (a handover's)}; empty in sessions older than it
+    qd: np.ndarray = array("float64", ("n", "nq"), optional=True)  # joint velocities at the samples, read from the timed
+    # trajectory (rad/s); empty in sessions older than it
+    qdd: np.ndarray = array("float64", ("n", "nq"), optional=True)  # joint accelerations there (rad/s^2, constant over each
+    # parabolic piece: at a breakpoint the next piece's; where the robot comes to rest, the last piece's); empty likewise
 
     @property
     def duration(self) -> float:

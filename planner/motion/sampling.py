@@ -20,10 +20,13 @@ from planner.motion.smoothing import Smoother, runs
 
 @dataclass
 class Sampled:
-    """Configurations after the first, the index into `pieces` of each one's piece, and the smoothing's figures per
-    run (its first piece's phase, collision checks, shortcuts kept)."""
+    """Configurations after the first, with their velocities and accelerations, the index into `pieces` of each one's
+    piece, and the smoothing's figures per run (its first piece's phase, collision checks, shortcuts kept)."""
 
     q: list = field(default_factory=list)
+    v: list = field(default_factory=list)
+    a: list = field(default_factory=list)
+    start_a: np.ndarray | None = None  # the acceleration the motion starts with (the first run's at its start)
     owner: list = field(default_factory=list)
     pieces: list = field(default_factory=list)
     figures: list = field(default_factory=list)
@@ -50,10 +53,14 @@ def sample(pieces: list[Piece], smoother: Smoother, rng: np.random.Generator, dt
         factor = n * dt / smoothed.trajectory.duration
         traj, ends = smoothed.trajectory.scaled(factor), smoothed.ends * factor
         times = np.arange(1, n + 1) * dt
-        q = traj.positions(times)
-        q[-1] = traj.end
+        q, v = traj.states(times)
+        q[-1], v[-1] = traj.end, 0.0  # a run ends at rest
         owner = np.minimum(np.searchsorted(ends, times - 1e-9, side="left"), len(smoothed.pieces) - 1)
         out.q.append(q)
+        out.v.append(v)
+        out.a.append(traj.accelerations(times))
+        if out.start_a is None:
+            out.start_a = traj.accelerations(np.zeros(1))
         out.owner += (owner + len(out.pieces)).tolist()
         out.pieces += smoothed.pieces
         out.figures.append((smoothed.pieces[0].phase, smoothed.checks, smoothed.shortcuts))

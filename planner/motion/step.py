@@ -115,6 +115,8 @@ def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, 
     smoother = Smoother(planner.validities, vmax, np.full(robot.nq, p.max_acceleration), p.smooth_min_gain)
     out = sample(pieces, smoother, rng, 1.0 / p.rate, p.smooth_attempts, p.smooth_checks)
     q = np.concatenate([scene.q_initial[None]] + out.q)
+    qd = np.concatenate([np.zeros((1, robot.nq))] + out.v)  # at rest at the start
+    qdd = np.concatenate([np.zeros((1, robot.nq)) if out.start_a is None else out.start_a] + out.a)
     kept = out.pieces
     owner = np.array([-1] + out.owner)
     data = robot.model.createData()
@@ -155,7 +157,7 @@ def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, 
     intermediate = () if attempt.intermediate is None else tuple(tuple(float(x) for x in row) for row in attempt.intermediate)
     return Motion(p.planner, attempt.used, attempt.tried, table, arms, resolution, stages, "", t, q, phase_arr, np.array(poses),
                   np.array(holder, np.int8), np.array(active, np.int8), np.array(wrists), np.array(key, np.int64),
-                  tuple(robot.joint_names()), names, attempt.strategy, alternatives, intermediate, tuple(attempt.sequence))
+                  tuple(robot.joint_names()), names, attempt.strategy, alternatives, intermediate, tuple(attempt.sequence), qd, qdd)
 
 
 def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: list[Piece], smoothing_checks: int, name: str) -> dict:

@@ -44,6 +44,12 @@ class Trajectory:
     def positions(self, times: np.ndarray) -> np.ndarray:
         return self.states(times)[0]
 
+    def accelerations(self, times: np.ndarray) -> np.ndarray:
+        """The accelerations at the given times (clipped to the trajectory): the piece's each time starts, the last
+        piece's at the end (constant over a piece: at a breakpoint, the one after it)."""
+        times = np.clip(np.asarray(times, float), 0.0, self.duration)
+        return self.a[np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, len(self.q) - 1)]
+
     def speed_bounds(self, split: int = 4) -> tuple[np.ndarray, np.ndarray]:
         """(breakpoints, (K * split, n) per part and joint the largest speed in it), each piece cut in `split` equal
         parts: velocity is linear in a piece, so its largest magnitude in a part is at one of the part's ends. A joint

@@ -2,8 +2,9 @@
 (plus regrasp's own fields beside it), or CSV with a header. docs/sessions.md describes both formats.
 
 Every sample of the motion is one point: its time, the positions (q, in the robot model's joint order), the velocities
-(central finite differences of the samples: the motion result stores none), the phase, the arm holding the object and
-the object's pose. Positions and times are written with every digit (they read back equal to `motion.npz`)."""
+and accelerations of the timed trajectory there (a session older than them stores neither: its velocities are central
+finite differences of the samples and its accelerations are left out), the phase, the arm holding the object and the
+object's pose. Numbers are written with every digit (they read back equal to `motion.npz`)."""
 from __future__ import annotations
 
 import csv
@@ -31,13 +32,15 @@ KEYFRAMES = ("initial", "grasp", "exchange", "place", "final")  # `Motion.keyfra
 
 @dataclass(frozen=True)
 class TrajectoryPoints:
-    """The motion's samples as a trajectory: joint names, times (s), positions and velocities (n, joints), each
-    sample's phase name and holding arm ('' when none), and the object's pose as position and quaternion (x, y, z, w)."""
+    """The motion's samples as a trajectory: joint names, times (s), positions, velocities and accelerations (n, joints;
+    no rows of accelerations when the session has none), each sample's phase name and holding arm ('' when none), and
+    the object's pose as position and quaternion (x, y, z, w)."""
 
     joint_names: tuple[str, ...]
     t: np.ndarray
     positions: np.ndarray
     velocities: np.ndarray
+    accelerations: np.ndarray
     phases: tuple[str, ...]
     holders: tuple[str, ...]
     object_xyz: np.ndarray
@@ -73,7 +76,10 @@ def trajectory_of(session: Session) -> TrajectoryPoints:
     arms = [str(a) for a in motion.arms]
     holders = tuple(arms[h] if 0 <= h < len(arms) else "" for h in motion.holder.tolist())
     keys = {name: int(i) for name, i in zip(KEYFRAMES, motion.keyframes.tolist())}
-    return TrajectoryPoints(names, motion.t, motion.q, finite_difference_velocities(motion.t, motion.q),
+    timed = len(motion.qd) == len(motion.t) and len(motion.qdd) == len(motion.t)  # else a session older than them
+    velocities = motion.qd if timed else finite_difference_velocities(motion.t, motion.q)
+    accelerations = motion.qdd if timed else np.zeros((0, len(names)))
+    return TrajectoryPoints(names, motion.t, motion.q, velocities, accelerations,
                       tuple(motion.phase_name(p) for p in motion.phase.tolist()), holders, motion.object_pose[:, :3, 3],
                       Rotation.from_matrix(motion.object_pose[:, :3, :3]).as_quat(), keys)
 
@@ -89,10 +95,12 @@ def _floats(row: np.ndarray) -> list[float]:
 
 
 def trajectory_json(tr: TrajectoryPoints) -> str:
-    """JointTrajectory's fields (header, joint_names, points with positions, velocities, time_from_start), then
-    regrasp's per-point lists beside them (time, phase, holder, object_pose as geometry_msgs/Pose) and the keyframes."""
-    points = [{"positions": _floats(p), "velocities": _floats(v), "accelerations": [], "effort": [], "time_from_start": duration(t)}
-              for t, p, v in zip(tr.t.tolist(), tr.positions, tr.velocities)]
+    """JointTrajectory's fields (header, joint_names, points with positions, velocities, accelerations (empty when
+    unknown), time_from_start), then regrasp's per-point lists beside them (time, phase, holder, object_pose as
+    geometry_msgs/Pose) and the keyframes."""
+    acc = [_floats(a) for a in tr.accelerations] if len(tr.accelerations) else [[] for _ in tr.t]
+    points = [{"positions": _floats(p), "velocities": _floats(v), "accelerations": a, "effort": [], "time_from_start": duration(t)}
+              for t, p, v, a in zip(tr.t.tolist(), tr.positions, tr.velocities, acc)]
     poses = [{"position": dict(zip("xyz", _floats(x))), "orientation": dict(zip("xyzw", _floats(r)))}
              for x, r in zip(tr.object_xyz, tr.object_xyzw)]
     data = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": FRAME}, "joint_names": list(tr.joint_names), "points": points,
@@ -107,15 +115,17 @@ def _cell(text: str) -> str:
 
 
 def csv_header(tr: TrajectoryPoints) -> list[str]:
-    """time, phase, holder, the object's pose, then position:JOINT and velocity:JOINT per joint in the model's order."""
-    return ["time", "phase", "holder", *POSE_COLUMNS, *(_cell(f"position:{n}") for n in tr.joint_names),
-            *(_cell(f"velocity:{n}") for n in tr.joint_names)]
+    """time, phase, holder, the object's pose, then position:JOINT, velocity:JOINT and (when known)
+    acceleration:JOINT per joint in the model's order."""
+    kinds = ("position", "velocity", "acceleration") if len(tr.accelerations) else ("position", "velocity")
+    return ["time", "phase", "holder", *POSE_COLUMNS, *(_cell(f"{kind}:{n}") for kind in kinds for n in tr.joint_names)]
 
 
 def _csv_rows(tr: TrajectoryPoints) -> Iterator[list]:
     for i, t in enumerate(tr.t.tolist()):
         yield [repr(t), tr.phases[i], _cell(tr.holders[i]), *map(repr, _floats(tr.object_xyz[i])), *map(repr, _floats(tr.object_xyzw[i])),
-               *map(repr, _floats(tr.positions[i])), *map(repr, _floats(tr.velocities[i]))]
+               *map(repr, _floats(tr.positions[i])), *map(repr, _floats(tr.velocities[i])),
+               *(map(repr, _floats(tr.accelerations[i])) if len(tr.accelerations) else ())]
 
 
 def trajectory_csv(tr: TrajectoryPoints) -> str:
