@@ -79,10 +79,10 @@ def test_bench_collision_json(tmp_path):
     assert "median µs" in run.stdout
 
 
-@pytest.mark.slow  # about 30 s from an empty cache: grasp lists, two 4-node roadmaps, three motions
+@pytest.mark.slow  # about 20 s from an empty cache: grasp lists, two 4-node roadmaps, three motions
 def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
     out = tmp_path / "motion.json"
-    small = ("roadmap.nodes=4", "roadmap.task_nodes=0", "pick_grasps.orientations=40", "place_grasps.orientations=40",
+    small = ("roadmap.nodes=4", "roadmap.task_nodes=0", "pick_grasps.orientations=16", "place_grasps.orientations=16",
              "motion.smooth_checks=2000")
     run = sandbox.regrasp("bench", "motion", "--seeds", "1", "--roadmaps", "2", *(a for s in small for a in ("--set", s)),
                           "--json", str(out), REGRASP_CACHE=str(tmp_path / "cache"))
