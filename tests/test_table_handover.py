@@ -33,6 +33,8 @@ DESK_TOP = 0.72  # m: the default desk's top surface (assets/tasks/default.toml)
 CUBE_GRASPS = {"positions": 40, "orientations": 60}  # 4,860 frames: a cube's hundreds of grasps, 6 s a hand instead of 36
 SHARED_ROADMAP = {"roadmap": {"task_nodes": 0}}  # the desk's roadmap without the task's sites, built once for every task
 CUBE_PARAMS = {**SHARED_ROADMAP, "pick_grasps": CUBE_GRASPS, "place_grasps": CUBE_GRASPS}
+CAN_GRASPS = {"positions": 20, "orientations": 60}  # 2,880 frames: enough grasps clear the desk without a denser search
+SMALL_OBJECT_PARAMS = {"cube": CUBE_PARAMS, "can": {**SHARED_ROADMAP, "pick_grasps": CAN_GRASPS, "place_grasps": CAN_GRASPS}}
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
 
 
@@ -94,7 +96,7 @@ def test_the_placements_step_is_recorded_and_drawn(tmp_path, cube_scene):
 def test_a_small_object_is_handed_over_through_the_table(tmp_path, name):
     scene = load_task(small_object_task(tmp_path, name))
     session = Session.create(tmp_path / "session", scene, 0)
-    run_pipeline(session, params=CUBE_PARAMS)
+    run_pipeline(session, params=SMALL_OBJECT_PARAMS[name])
     m = session.result("motion")
     assert not m.failure and m.strategy == "table"
     rejected = {a["strategy"]: a["failure"] for a in m.alternatives}
@@ -108,7 +110,7 @@ def test_a_small_object_is_handed_over_through_the_table(tmp_path, name):
     # forced to hand over in the air, the motion fails naming the stage that removed every double grasp
     branch = session.branch(tmp_path / "handover", "motion")
     with pytest.raises(StepFailed, match="handover strategy: double grasps: no compatible pair"):
-        run_pipeline(branch, params={**CUBE_PARAMS, "motion": {"strategy": "handover"}})
+        run_pipeline(branch, params={**SMALL_OBJECT_PARAMS[name], "motion": {"strategy": "handover"}})
 
 
 def moved_through_a_placement(session, m) -> tuple[np.ndarray, np.ndarray]:
