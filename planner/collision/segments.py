@@ -12,6 +12,12 @@ position is within (p - c) of a checked one. A segment is checked at the fewest 
 configurations that satisfy this for every pair of the subset, in van der Corput order (midpoint
 first) so that colliding segments fail early.
 
+Each pair as densely as it needs: the configurations are as many as the pair that moves most needs; a pair that
+moves 2^j times less is checked only at every 2^j-th of them (and both ends), which keeps its own bound. The checks
+go level by level, every pair at the coarsest (every 2^J-th configuration, the ends), then at each finer level only
+the pairs that need it, in van der Corput order within a level. Most pairs past the broad phase move far less than
+the one that sets the count (a fingertip sets it; the forearm near the desk does not).
+
 Coarse first (`coarse` k > 1, for motions whose paddings are tight): the segment is checked at every
 k-th of those configurations with each pair padded by P = c + k (p - c), so that between two of them
 it moves at most 2 (P - c); where both ends of such an interval pass, the pair keeps c along it.
@@ -26,6 +32,7 @@ The curve is checked at evenly spaced values of u (coarse first alike): the guar
 from __future__ import annotations
 
 import functools
+from collections import OrderedDict
 from collections.abc import Callable
 from typing import Protocol
 
@@ -71,6 +78,21 @@ def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.nd
             rest = sum(lengths[i + 2:])
             radii[g, model.joints[j].idx_q] = float(np.linalg.norm(across)) + rest + reach
     return radii
+
+
+MAX_LEVEL = 4  # a pair is checked at every 16th configuration at the sparsest: the finest levels hold the savings
+FEW_PAIRS = 16  # a level due for this many pairs or fewer tests each on its own, without the broad phase
+LEVEL_SUBSETS = 32  # per segment checker, the pair subsets of levels kept with their collision tables (most recent)
+
+
+@functools.lru_cache(maxsize=4096)
+def level_order(n: int, top: int) -> tuple[tuple[int, np.ndarray], ...]:
+    """The indices 0..n-1 by level, coarsest first: level `top` holds 0, n-1 and the multiples of 2^top, level j < top
+    the odd multiples of 2^j; within a level in van der Corput order (read-only, computed once per n and top)."""
+    order = (van_der_corput(n) * (n - 1)).round().astype(int)
+    odd = order & -order  # the largest power of two dividing each index (0 for index 0)
+    level = np.where((order == 0) | (order == n - 1), top, np.minimum(np.log2(np.maximum(odd, 1)).astype(int), top))
+    return tuple((j, frozen(order[level == j])) for j in range(top, -1, -1) if np.any(level == j))
 
 
 @functools.lru_cache(maxsize=4096)
@@ -133,6 +155,8 @@ class SegmentChecker:
         allow = allowances(cm, env_clearance, self_clearance, object_clearance)
         self._per_pair = sweep / (2.0 * allow)[:, None]
         self._weights: dict[str, np.ndarray] = {}
+        self._pair_rows: dict[str, np.ndarray] = {}
+        self._levels: OrderedDict[tuple[str, bytes], np.ndarray] = OrderedDict()
         self._leading_rows: dict[tuple[str, bytes], np.ndarray] = {}
         self.coarse = int(coarse)
         self._coarse_margins = pair_table(cm, paddings + (self.coarse - 1) * allow) if coarse > 1 else None
@@ -151,9 +175,25 @@ class SegmentChecker:
         if subset not in self._weights:
             rows = np.ascontiguousarray(self._per_pair[self.cm.subsets[subset]])
             # distinct rows, found by their bytes (np.unique(axis=0) sorts lexicographically: much slower)
-            _, first = np.unique(rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1]))).ravel(), return_index=True)
+            _, first, inverse = np.unique(rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1]))).ravel(),
+                                          return_index=True, return_inverse=True)
+            rank = np.empty(len(first), dtype=int)
+            rank[np.argsort(first, kind="stable")] = np.arange(len(first))
             self._weights[subset] = rows[np.sort(first)]
+            self._pair_rows[subset] = rank[inverse.ravel()]  # each pair's row
         return self._weights[subset]
+
+    def pair_levels(self, subset: str, need: np.ndarray, n: int) -> np.ndarray | None:
+        """Per pair of the subset, j such that checking it at every 2^j-th of n configurations keeps its bound, given
+        `need` per row of `weights(subset)`: how many of the n - 1 intervals its displacement spans at most; None when
+        every pair needs every configuration."""
+        if n < 3:
+            return None
+        top = min(MAX_LEVEL, int(np.log2(n - 1)))
+        with np.errstate(divide="ignore"):
+            rows = np.floor(np.log2((n - 1) / np.maximum(need, 0.0)))
+        rows = np.clip(np.nan_to_num(rows, posinf=top), 0, top).astype(int)
+        return rows[self._pair_rows[subset]] if rows.any() else None
 
     def steps(self, qa: np.ndarray, qb: np.ndarray, subset: str) -> np.ndarray:
         """Configurations checked on each segment qa[i] -> qb[i] (vectorised; both ends included)."""
@@ -170,7 +210,9 @@ class SegmentChecker:
     def first_hit(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> np.ndarray | None:
         """The first configuration of the segment, in checking order, whose check fails; None when all pass."""
         dq = qb - qa
-        return self._first_hit(int(self.steps(qa, qb, subset)[0]), lambda s: qa + s * dq, subset, ends)
+        sweep = np.abs(dq) @ self.weights(subset).T
+        n = int(np.ceil(sweep.max(initial=0.0))) + 1
+        return self._first_hit(n, lambda s: qa + s * dq, subset, ends, self.pair_levels(subset, sweep, n))
 
     def curve_first_hit(self, curve: Curve, subset: str, ends: bool = True) -> np.ndarray | None:
         """The first configuration of a curve, in checking order, whose check fails; None when all pass (see the
@@ -183,7 +225,12 @@ class SegmentChecker:
         n = int(np.ceil(clock[-1])) + 1
         grid = self._grid(n)  # every parameter a check may read, evaluated at once
         q = curve.positions(np.interp(np.linspace(0.0, clock[-1], grid), clock, t))
-        return self._first_hit(n, lambda s: q[int(round(s * (grid - 1)))], subset, ends)
+        levels = None
+        if grid == n and n >= 3:  # a row moves at most its largest share of the clock's rate, in any piece, along it
+            row_rates = np.einsum("kj,rj->kr", bound[:, moving], self.weights(subset)[:, moving])
+            share = (row_rates / np.maximum(rates, 1e-300)[:, None]).max(axis=0, where=rates[:, None] > 0, initial=0.0)
+            levels = self.pair_levels(subset, share * clock[-1], n)
+        return self._first_hit(n, lambda s: q[int(round(s * (grid - 1)))], subset, ends, levels)
 
     def _leading(self, subset: str, moving: np.ndarray) -> np.ndarray:
         """The subset's displacement weights over the moving joints without the rows another row bounds everywhere
@@ -203,18 +250,53 @@ class SegmentChecker:
             return -(-(n - 1) // self.coarse) * self.coarse + 1
         return n
 
-    def _first_hit(self, n: int, at: Callable[[float], np.ndarray], subset: str, ends: bool) -> np.ndarray | None:
-        """The first of n evenly spaced configurations at(s), s in 0..1, whose check fails (coarse first, see the
-        module); None when all pass."""
+    def _first_hit(self, n: int, at: Callable[[float], np.ndarray], subset: str, ends: bool,
+                   levels: np.ndarray | None = None) -> np.ndarray | None:
+        """The first of n evenly spaced configurations at(s), s in 0..1, whose check fails (coarse first, or each pair
+        at its `levels`: see the module); None when all pass."""
         if self._grid(n) != n:
             s = coarse_first(n, self.coarse, lambda s, coarse: self.in_collision(at(s), subset, coarse), ends)
             return None if s is None else at(s)
+        if levels is not None:
+            return self._by_levels(n, at, subset, ends, levels)
         order = van_der_corput(n)
         for s in (order if ends else order[2:]):
             q = at(s)
             if self.in_collision(q, subset):
                 return q
         return None
+
+    def _by_levels(self, n: int, at: Callable[[float], np.ndarray], subset: str, ends: bool,
+                   levels: np.ndarray) -> np.ndarray | None:
+        """_first_hit with pair p checked only at the multiples of 2^levels[p] (and the ends), coarsest level first."""
+        for j, indices in level_order(n, int(levels.max())):
+            due = levels <= j
+            few = int(due.sum()) <= FEW_PAIRS
+            pairs = self.cm.subsets[subset][due] if few else self._level_subset(subset, due)
+            for i in indices:
+                if not ends and (i == 0 or i == n - 1):
+                    continue
+                q = at(i / (n - 1))
+                self.checks += 1
+                if (self.checker.few_collide(q, pairs, self._margins) if few else
+                        self.checker.in_collision(q, pairs, margins=self._margins)):
+                    return q
+        return None
+
+    def _level_subset(self, subset: str, due: np.ndarray) -> np.ndarray:
+        """The subset's pairs marked `due`: the subset's own array when all are, else one kept (with the collision
+        tables the checker makes for it) among the most recent LEVEL_SUBSETS."""
+        pairs = self.cm.subsets[subset]
+        if due.all():
+            return pairs
+        key = (subset, np.packbits(due).tobytes())
+        if key in self._levels:
+            self._levels.move_to_end(key)
+        else:
+            self._levels[key] = pairs[due]
+            if len(self._levels) > LEVEL_SUBSETS:
+                self.checker.forget(self._levels.popitem(last=False)[1])
+        return self._levels[key]
 
 
 def _undominated(rows: np.ndarray) -> np.ndarray:

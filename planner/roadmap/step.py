@@ -14,7 +14,7 @@ from planner.model.task import Scene
 from planner.roadmap.build import build_roadmap
 from planner.roadmap.result import Roadmap, RoadmapParams
 
-CODE_VERSION = "roadmap-3"  # 2: no timings in the roadmap; 3: nodes around the task's sites
+CODE_VERSION = "roadmap-4"  # 2: no timings in the roadmap; 3: nodes around the task's sites; 4: each pair checked as densely as it needs
 
 
 def cache_key(scene: Scene, params: RoadmapParams, seed: int) -> str:
