@@ -174,6 +174,35 @@ def test_few_pairs_answer_as_the_broad_phase_does(default_scene, default_collisi
     assert 30 < hits < 270, hits
 
 
+def test_few_pairs_with_the_object_answer_as_its_screened_check_does(default_scene, default_collision):
+    """With the object beside the right hand (its hull screening its mesh), a few pairs tested one by one, the hull
+    first, answer as the model's own check of those pairs, which tries the hull first too."""
+    from planner.collision.shapes import coal_convex, coal_mesh
+    from planner.collision.situation import Situation, situation_model
+
+    robot = default_scene.robot
+    pose = robot.frame_placement(robot.q_rest, robot.palm_frame("right"))
+    pose[:3, 3] += pose[:3, 2] * 0.06
+    moving = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
+    mesh = default_scene.object_mesh
+    cm = situation_model(default_collision, coal_mesh(mesh), Situation(None, pose), (), moving, coal_convex(mesh.convex_hull))
+    assert cm.twins is not None
+    checker = cm.checker()
+    margins = pair_table(cm, cm.paddings())
+    objects = cm.subsets["object"]
+    rng = np.random.default_rng(5)
+    answers = []
+    for _ in range(200):
+        q = robot.q_rest.copy()
+        q[moving] += rng.normal(0.0, 0.08, len(moving))
+        pairs = np.sort(rng.choice(objects, min(FEW_PAIRS, len(objects)), replace=False))
+        answer = checker.in_collision(q, pairs, margins=margins)
+        assert checker.few_collide(q, pairs, margins) == answer
+        checker.forget(pairs)
+        answers.append(answer)
+    assert 10 < sum(answers) < 190, sum(answers)
+
+
 def test_level_subsets_are_kept_only_while_recent(default_scene, padded):
     """Many segments of different directions leave the checker at most LEVEL_SUBSETS subsets of levels (with their
     collision tables) besides the named ones."""
