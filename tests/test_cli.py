@@ -93,7 +93,7 @@ def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
     assert [(r["seed"], r["roadmap"]) for r in figures["runs"]["rrt"]] == [(0, None)]
     assert figures["ours_success"] == 1.0 and figures["rrt_success"] == 1.0
     assert all(r["pair_tests"] > 0 and r["duration"] > 0 for r in figures["per_roadmap"])
-    for r in figures["runs"]["roadmap"] + figures["runs"]["rrt"]:  # --set reached the motion step (20,000 by default)
+    for r in figures["runs"]["roadmap"] + figures["runs"]["rrt"]:  # --set reached the motion step (24,000 by default)
         assert sum(p["smoothing_checks"] for p in r["phases"]) < 3000
     assert "ours per roadmap" in run.stdout and "the roadmap of session seed 1" in run.stderr
 
