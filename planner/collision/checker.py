@@ -268,7 +268,8 @@ class CollisionChecker:
         self.checks += 1
         gm = self.cm.geometry
         if self._gd is None:
-            self._subset(pairs, margins)
+            self._subset(pairs, margins)  # makes the collision data
+            self.forget(pairs)
         if self._margins is not margins:
             self._gd.setSecurityMargins(gm, margins, True, False)
             self._margins, self._last = margins, None
