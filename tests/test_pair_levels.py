@@ -1,5 +1,6 @@
 """Each pair checked as densely as its own motion needs (planner/collision/segments.py): the schedule of levels, the
-levels a pair gets, what a real segment check tests, and the few-pair test without the broad phase."""
+levels a pair gets, what real segments and smoothing ramps test (their pairs' motion between two tests measured by
+kinematics alone), the few-pair test without the broad phase, and the bounded cache of level subsets."""
 from __future__ import annotations
 
 import dataclasses
