@@ -175,6 +175,7 @@ def test_few_pairs_answer_as_the_broad_phase_does(default_scene, default_collisi
     assert 30 < hits < 270, hits
 
 
+@pytest.mark.slow
 def test_few_pairs_with_the_object_answer_as_its_screened_check_does(default_scene, default_collision):
     """With the object beside the right hand (its hull screening its mesh), a few pairs tested one by one, the hull
     first, answer as the model's own check of those pairs, which tries the hull first too."""
@@ -217,6 +218,7 @@ def test_level_subsets_are_kept_only_while_recent(default_scene, padded):
     assert len(seg.checker._tables) <= LEVEL_SUBSETS + len(padded.subsets)
 
 
+@pytest.mark.slow
 def test_a_curve_tests_each_pair_often_enough_for_its_own_motion(default_scene, padded, monkeypatch):
     """Along random parabolic ramps from the rest pose (the smoothing's curves), a pair tested at fewer configurations
     than the curve's checks moves, between two of its tests (measured by kinematics on 1,000 samples of the curve), no
