@@ -172,12 +172,20 @@ def test_object_only_the_placing_arm_reaches_fails_at_the_pick_stage(tmp_path):
     assert resumed.returncode == 1 and "no collision-free pick grasp" in resumed.stderr
 
 
-def test_bench_double_grasps_json(planned, tmp_path):
+def test_bench_double_grasps_json(default_scene, tmp_path):
+    """Two runs of the online steps with `--set` (few IK starts), each as a session planned with the same parameters."""
     out = tmp_path / "bench.json"
     run = subprocess.run([sys.executable, "-m", "workbench.cli", "bench", "double-grasps", "--seed", str(SEED), "--repeat", "2",
-                          "--json", str(out)], capture_output=True, text=True, timeout=900)
+                          *FEW_STARTS, "--json", str(out)], capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr
     figures = json.loads(out.read_text())
     assert len(figures["runs"]) == 2 and set(figures["runs"][0]) == {"grasp_configs", "exchange", "double_grasps"}
-    assert figures["double_grasps"][0] == figures["double_grasps"][1] == len(planned.result("double_grasps"))
+    same = Session.create(tmp_path / "same", default_scene, seed=SEED)
+    run_pipeline(same, until="double-grasps", params={"grasp_configs": {"attempts": 2, "wide_attempts": 0}})
+    assert figures["double_grasps"][0] == figures["double_grasps"][1] == len(same.result("double_grasps"))
+    found = {name: [(row["stage"], row["count"]) for row in rows] for name, rows, _ in figures["stages"]}
+    assert found["grasp_configs"] == [(row["stage"], row["count"]) for row in same.result("grasp_configs").stages]  # --set reached it
     assert "total" in run.stdout and "exchange configurations" in run.stdout
+    bad = subprocess.run([sys.executable, "-m", "workbench.cli", "bench", "double-grasps", "--set", "grasp_configs.nope=1"],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode != 0 and "nope" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1

@@ -108,6 +108,7 @@ def _relative_motion(model: pin.Model, gm: pin.GeometryModel, pair: tuple[int, i
     return max(float(np.linalg.norm(placed(qa + s * (qb - qa)) - start, axis=1).max()) for s in np.linspace(0, 1, 9)[1:])
 
 
+@pytest.mark.slow
 def test_a_real_segment_tests_each_pair_at_its_own_spacing_and_no_sparser(default_scene, padded, monkeypatch):
     """Along free segments of the default robot, the pairs past the coarsest level are tested at every multiple of
     their spacing; between two of a pair's tests its geometries move (measured by kinematics alone) no more than twice

@@ -108,18 +108,20 @@ class DoubleGraspBench:
         return "\n".join(out)
 
 
-def bench_double_grasps(scene: Scene, seed: int, repeat: int, folder, progress=print) -> DoubleGraspBench:
-    """Run arms and both grasp lists once (from the cache when there), then the online steps `repeat` times on branches."""
+def bench_double_grasps(scene: Scene, seed: int, repeat: int, folder, progress=print,
+                        params: dict | None = None) -> DoubleGraspBench:
+    """Run arms and both grasp lists once (from the cache when there), then the online steps `repeat` times on branches;
+    `params`: step -> parameter overrides (`--set`), for every step."""
     from planner.core.runner import run_pipeline
     from planner.core.session import Session
 
     base = Session.create(folder / "base", scene, seed)
     progress("arms and grasp lists (from the user cache when computed before) ...")
-    run_pipeline(base, until="place_grasps")
+    run_pipeline(base, until="place_grasps", params=params)
     runs, counts, stages = [], [], []
     for i in range(repeat):
         branch = base.branch(folder / f"run{i}", ONLINE_STEPS[0])
-        run_pipeline(branch, until=ONLINE_STEPS[-1])
+        run_pipeline(branch, until=ONLINE_STEPS[-1], params=params)
         runs.append({name: branch.record_of(name)["seconds"] for name in ONLINE_STEPS})
         counts.append(len(branch.result("double_grasps")))
         stages = [(name, branch.result(name).stages, branch.record_of(name).get("stage_seconds", [])) for name in ONLINE_STEPS]

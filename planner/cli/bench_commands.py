@@ -44,8 +44,10 @@ def _bench_in_scratch(args: argparse.Namespace, bench: Callable[[Scene, Path, Ca
 
 def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
     from planner.cli.bench import bench_double_grasps
+    from planner.cli.plan import step_params
 
-    return _bench_in_scratch(args, lambda scene, tmp, say: bench_double_grasps(scene, args.seed, args.repeat, tmp, say))
+    params = step_params(args.set or [])  # a bad --set fails here, before any step runs
+    return _bench_in_scratch(args, lambda scene, tmp, say: bench_double_grasps(scene, args.seed, args.repeat, tmp, say, params))
 
 
 def _cmd_bench_motion(args: argparse.Namespace) -> int:
@@ -88,6 +90,8 @@ def add_bench(line: CommandLine) -> None:
     add_task(bd)
     bd.add("--seed", type=seed_argument, default=0, help="session seed")
     bd.add("--repeat", type=positive_int, default=5, help="runs timed")
+    bd.add("--set", action="append", metavar="STEP.PARAM=VALUE",
+           help="a step parameter for every run (repeatable; `regrasp params` lists them)")
     add_json(bd, "the figures")
     bm = line.command("motion", "Table I: the motion over seeds with the Super Graph and with RRTConnect alone", _cmd_bench_motion,
                       within="bench")
