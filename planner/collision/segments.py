@@ -197,7 +197,14 @@ class SegmentChecker:
 
     def steps(self, qa: np.ndarray, qb: np.ndarray, subset: str) -> np.ndarray:
         """Configurations checked on each segment qa[i] -> qb[i] (vectorised; both ends included)."""
-        sweep = np.abs(np.atleast_2d(qb) - np.atleast_2d(qa)) @ self.weights(subset).T
+        return self._steps(self._sweep(qa, qb, subset))
+
+    def _sweep(self, qa: np.ndarray, qb: np.ndarray, subset: str) -> np.ndarray:
+        """(segments, rows) how many allowed displacements each row of `weights(subset)` spans along each segment."""
+        return np.abs(np.atleast_2d(qb) - np.atleast_2d(qa)) @ self.weights(subset).T
+
+    @staticmethod
+    def _steps(sweep: np.ndarray) -> np.ndarray:
         return np.ceil(sweep.max(axis=1, initial=0.0)).astype(int) + 1
 
     def free(self, q: np.ndarray, subset: str) -> bool:
@@ -210,9 +217,9 @@ class SegmentChecker:
     def first_hit(self, qa: np.ndarray, qb: np.ndarray, subset: str, ends: bool = True) -> np.ndarray | None:
         """The first configuration of the segment, in checking order, whose check fails; None when all pass."""
         dq = qb - qa
-        sweep = np.abs(dq) @ self.weights(subset).T
-        n = int(np.ceil(sweep.max(initial=0.0))) + 1
-        return self._first_hit(n, lambda s: qa + s * dq, subset, ends, self.pair_levels(subset, sweep, n))
+        sweep = self._sweep(qa, qb, subset)
+        n = int(self._steps(sweep)[0])
+        return self._first_hit(n, lambda s: qa + s * dq, subset, ends, self.pair_levels(subset, sweep[0], n))
 
     def curve_first_hit(self, curve: Curve, subset: str, ends: bool = True) -> np.ndarray | None:
         """The first configuration of a curve, in checking order, whose check fails; None when all pass (see the
