@@ -118,6 +118,8 @@ class Oracle:
             geom, verts = _fcl_geometry(o.geometry, o.meshScale)
             self.shapes.append(geom)
             spheres.append(_radius(geom, verts))
+        self.posed = [fcl.CollisionObject(geom) for geom in self.shapes]  # each placed when first tested at a q (`_at`)
+        self._placed: list[bool] = []
         self.centre = np.array([c for c, _ in spheres])
         self.radius = np.array([r for _, r in spheres])
         part = {}
@@ -143,6 +145,7 @@ class Oracle:
                       if ob.shape == "box"}
         self.env_objects = [fcl.CollisionObject(geom, _tf(T)) for _, geom, T in self.env]  # static: made once
         self.object, verts = _mesh(scene.object_mesh), np.asarray(scene.object_mesh.vertices, float)
+        self.posed_object = fcl.CollisionObject(self.object)
         self.object_centre, self.object_radius = _radius(self.object, verts)
         self.closed, self.object_box = ClosedMesh(scene.object_mesh), (verts.min(axis=0), verts.max(axis=0))
         self.surface = {g: _surface(objs[g].geometry, objs[g].meshScale) for hand in self.hand.values() for g in hand}
@@ -164,8 +167,16 @@ class Oracle:
     def _posed(self, q: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
         """(each geometry's world pose, its bounding sphere's world centre) at q."""
         poses = self._poses(q)
+        self._placed = [False] * len(poses)
         rot = np.array([T[:3, :3] for T in poses])
         return poses, np.einsum("gij,gj->gi", rot, self.centre) + np.array([T[:3, 3] for T in poses])
+
+    def _at(self, g: int, poses: list[np.ndarray]) -> fcl.CollisionObject:
+        """Geometry g's fcl object, placed at its pose at the configuration `_posed` last posed."""
+        if not self._placed[g]:
+            self.posed[g].setTransform(_tf(poses[g]))
+            self._placed[g] = True
+        return self.posed[g]
 
     def _environment_hits(self, poses: list[np.ndarray], centres: np.ndarray) -> list[str]:
         moving = np.array(self.moving)
@@ -174,14 +185,13 @@ class Oracle:
             local = centres[moving] @ inverse[:3, :3].T + inverse[:3, 3]
             near[:, e] &= np.linalg.norm(np.maximum(np.abs(local) - half, 0.0), axis=1) < self.radius[moving]
         return [f"{self.names[moving[a]]} with {self.env[e][0]}" for a, e in zip(*np.nonzero(near))
-                if fcl.collide(fcl.CollisionObject(self.shapes[moving[a]], _tf(poses[moving[a]])), self.env_objects[e],
-                               fcl.CollisionRequest(), fcl.CollisionResult()) > 0]
+                if _touch(self._at(moving[a], poses), self.env_objects[e])]
 
     def _self_hits(self, poses: list[np.ndarray], centres: np.ndarray) -> list[str]:
         i, j = self.pairs
         near = np.flatnonzero(np.linalg.norm(centres[i] - centres[j], axis=1) < self.radius[i] + self.radius[j])
         return [f"{self.names[i[k]]} with {self.names[j[k]]}" for k in near
-                if hit(self.shapes[i[k]], poses[i[k]], self.shapes[j[k]], poses[j[k]])]
+                if _touch(self._at(i[k], poses), self._at(j[k], poses))]
 
     def _object_hits(self, poses: list[np.ndarray], centres: np.ndarray, object_pose: np.ndarray,
                      excused: dict[int, float]) -> list[str]:
@@ -190,8 +200,9 @@ class Oracle:
         ocentre = object_pose[:3, :3] @ self.object_centre + object_pose[:3, 3]
         near = np.linalg.norm(centres[moving] - ocentre, axis=1) < self.radius[moving] + self.object_radius
         found = []
+        self.posed_object.setTransform(_tf(object_pose))
         for g in moving[near]:
-            if hit(self.shapes[g], poses[g], self.object, object_pose):
+            if _touch(self._at(g, poses), self.posed_object):
                 if g not in excused:
                     found.append(f"{self.names[g]} with the object")
                 elif (d := self.depth_in_object(g, poses[g], object_pose)) > excused[g]:
@@ -246,23 +257,41 @@ def hit(a, Ta, b, Tb) -> bool:
     return fcl.collide(fcl.CollisionObject(a, _tf(Ta)), fcl.CollisionObject(b, _tf(Tb)), fcl.CollisionRequest(), fcl.CollisionResult()) > 0
 
 
-def _object_between(session, motion, k: int, q: np.ndarray) -> np.ndarray:
+_REQUEST = fcl.CollisionRequest()
+
+
+def _touch(a: fcl.CollisionObject, b: fcl.CollisionObject) -> bool:
+    """Whether two posed fcl objects collide (a fresh result each time: fcl adds its contacts to the one it is given)."""
+    return fcl.collide(a, b, _REQUEST, fcl.CollisionResult()) > 0
+
+
+class _Carried:
     """The object's pose at q on the way to sample k (which holds for the whole interval before it): carried rigidly by
-    the holder's palm, else where sample k has it."""
-    h = int(motion.holder[k])
-    if h < 0:
-        return motion.object_pose[k]
-    robot = session.scene.robot
-    frame = robot.palm_frame(motion.arms[h])
-    grasp = np.linalg.inv(robot.frame_placement(motion.q[k], frame)) @ motion.object_pose[k]
-    return robot.frame_placement(q, frame) @ grasp
+    the holder's palm, else where sample k has it (pinocchio's kinematics in one data of its own)."""
+
+    def __init__(self, session, motion):
+        self.robot, self.motion = session.scene.robot, motion
+        self.data = self.robot.model.createData()
+
+    def grasp(self, k: int) -> tuple[str, np.ndarray] | None:
+        """(the holding palm's frame, the object in that frame) at sample k; None: nothing holds it."""
+        h = int(self.motion.holder[k])
+        if h < 0:
+            return None
+        frame = self.robot.palm_frame(self.motion.arms[h])
+        return frame, np.linalg.inv(self.robot.frame_placement(self.motion.q[k], frame, self.data)) @ self.motion.object_pose[k]
+
+    def pose(self, k: int, held: tuple[str, np.ndarray] | None, q: np.ndarray) -> np.ndarray:
+        if held is None:
+            return self.motion.object_pose[k]
+        return self.robot.frame_placement(q, held[0], self.data) @ held[1]
 
 
 def motion_collisions(session, m) -> list[tuple]:
     """(sample, fraction, pairs) of every colliding configuration of a planned motion: each sample and nine more on the
     chord before it, the holding and working hands excused as `Oracle.collisions` says, the object's supports while
     it is lifted or set down (a hand holding it and working at it)."""
-    oracle = Oracle(session.scene)
+    oracle, carried = Oracle(session.scene), _Carried(session, m)
     arms = m.arms
     bad = []
     lifting = {int(i) for i in np.flatnonzero((m.holder >= 0) & (m.active == m.holder))}  # lift and set-down
@@ -272,9 +301,10 @@ def motion_collisions(session, m) -> list[tuple]:
         active = arms[m.active[k]] if m.active[k] >= 0 else None
         fingers = session.scene.robot.hand_idx[active] if active else []
         closing = bool(np.any(m.q[k - 1, fingers] != m.q[k, fingers]))
+        held = carried.grasp(k)
         for s in np.linspace(0.1, 1.0, 10):
             q = m.q[k - 1] + s * (m.q[k] - m.q[k - 1])
-            found = oracle.collisions(q, _object_between(session, m, k, q), holder, active, k in lifting, closing)
+            found = oracle.collisions(q, carried.pose(k, held, q), holder, active, k in lifting, closing)
             if found:
                 bad.append((k, round(float(s), 1), found[:3]))
     return bad
