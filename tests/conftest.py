@@ -28,7 +28,9 @@ def default_collision(default_scene):
 
 @pytest.fixture(scope="module")
 def browser():
-    """Headless Debian chromium driven by playwright (software WebGL); skipped only when chromium is absent."""
+    """Headless Debian chromium driven by playwright (software WebGL), without WebGL's multisampling: in software it
+    took more than half of every frame's work, and the tests compare pixels, not smooth edges (the README picture keeps
+    it: workbench/screenshot.py); skipped only when chromium is absent."""
     from playwright.sync_api import sync_playwright
 
     from workbench.screenshot import CHROMIUM, CHROMIUM_ARGS
@@ -36,7 +38,7 @@ def browser():
     if not CHROMIUM.exists():
         pytest.skip("Debian chromium is not installed at /usr/bin/chromium (apt-get install chromium)")
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=[*CHROMIUM_ARGS, "--webgl-antialiasing-mode=none"])
         yield browser
         browser.close()
 

@@ -19,7 +19,8 @@ from planner.core.session import Session
 from planner.handover.exchange_grid import PalmWaypoints, exchange_costs
 
 SEED = 3  # as the session tests: the grasp lists come from the shared test cache
-FEW_STARTS = ("--set", "grasp_configs.attempts=2", "--set", "grasp_configs.wide_attempts=0")
+FEW_CONFIGS = {"grasp_configs": {"attempts": 2, "wide_attempts": 0}}  # a sixth of the IK starts
+FEW_STARTS = tuple(a for k, v in FEW_CONFIGS["grasp_configs"].items() for a in ("--set", f"grasp_configs.{k}={v}"))
 POSITION_TOL, ROTATION_TOL = 2e-3, 2e-2  # the step's IK tolerances
 # m: how deep a holding hand may be in the object at these configurations: its grasp's (the grasp list's
 # contact_clearance, 1 mm) plus how far the IK tolerances move a fingertip (the palm within POSITION_TOL, turned
@@ -109,12 +110,15 @@ def test_exchange_node_is_the_cheapest_free_node(planned):
     assert not manager.in_collision_single(sphere), "the best exchange node's object sphere hits an obstacle"
 
 
-def test_same_seed_same_double_grasps(planned, tmp_path):
-    again = Session.create(tmp_path / "again", planned.scene, seed=SEED)
-    run_pipeline(again, until="double_grasps")
+def test_same_seed_same_double_grasps(default_scene, tmp_path):
+    """Two sessions of one seed and parameters (few IK starts: a sixth of the work) write the same files, byte for byte."""
+    first, again = (Session.create(tmp_path / name, default_scene, seed=SEED) for name in ("first", "again"))
+    for session in (first, again):
+        run_pipeline(session, until="double_grasps", params=FEW_CONFIGS)
+    assert len(first.result("double_grasps")), "no double grasp to compare"
     for name in ("grasp_configs", "exchange", "double_grasps"):
         for file in (f"{name}.npz", f"{name}.json"):
-            assert (planned.folder / file).read_bytes() == (again.folder / file).read_bytes(), file
+            assert (first.folder / file).read_bytes() == (again.folder / file).read_bytes(), file
 
 
 def test_exchange_ik_runs_with_the_sessions_grasp_config_parameters(planned, tmp_path, monkeypatch):
@@ -130,7 +134,8 @@ def test_exchange_ik_runs_with_the_sessions_grasp_config_parameters(planned, tmp
 
     monkeypatch.setattr(step, "ConfigSampler", Spy)
     branch = planned.branch(tmp_path / "branch", "grasp_configs")
-    run_pipeline(branch, "double_grasps", {"grasp_configs": {"ik_iterations": 31}, "double_grasps": {"torso_sigma": 0.05}})
+    few = {"grasp_configs": {**FEW_CONFIGS["grasp_configs"], "ik_iterations": 31}, "double_grasps": {"torso_sigma": 0.05}}
+    run_pipeline(branch, "double_grasps", few)
     assert [(p.ik_iterations, p.torso_sigma) for p in seen] == [(31, 0.05)]
 
 
@@ -181,7 +186,7 @@ def test_bench_double_grasps_json(default_scene, tmp_path):
     figures = json.loads(out.read_text())
     assert len(figures["runs"]) == 2 and set(figures["runs"][0]) == {"grasp_configs", "exchange", "double_grasps"}
     same = Session.create(tmp_path / "same", default_scene, seed=SEED)
-    run_pipeline(same, until="double-grasps", params={"grasp_configs": {"attempts": 2, "wide_attempts": 0}})
+    run_pipeline(same, until="double-grasps", params=FEW_CONFIGS)
     assert figures["double_grasps"][0] == figures["double_grasps"][1] == len(same.result("double_grasps"))
     found = {name: [(row["stage"], row["count"]) for row in rows] for name, rows, _ in figures["stages"]}
     assert found["grasp_configs"] == [(row["stage"], row["count"]) for row in same.result("grasp_configs").stages]  # --set reached it
