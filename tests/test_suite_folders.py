@@ -3,6 +3,8 @@ wrong shape or types with one line naming the file and the field; links among th
 session's files are), so neither `--resume` nor `--force` writes where a link points."""
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import shutil
 from collections.abc import Callable
@@ -12,6 +14,8 @@ from typing import Any
 import pytest
 from sandbox import one_error_line, regrasp, snapshot
 from test_suite import REGIONS
+
+from workbench.cli import main
 
 SUITE = f"""
 name = "one"
@@ -48,8 +52,12 @@ def suite(finished: tuple[Path, Path], tmp_path: Path) -> tuple[Path, Path, Path
 
 
 def _run(spec: Path, folder: Path, *options: str) -> tuple[int, str]:
-    run = regrasp("suite", str(spec), "--out", str(folder), "--until", "arms", *options)
-    return run.returncode, run.stderr
+    """`regrasp suite` on the finished folder, in this process (the finished suite's run is the one subprocess: these
+    refusals come before any task runs, and a fresh interpreter's imports were most of each test's time)."""
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["suite", str(spec), "--out", str(folder), "--until", "arms", *options])
+    return code, err.getvalue()
 
 
 def _outcome(key: str, value: Any) -> Callable[[dict[str, Any]], None]:
