@@ -253,11 +253,12 @@ class Oracle:
         return found + self._self_hits(poses, centres)
 
 
-def hit(a, Ta, b, Tb) -> bool:
-    return fcl.collide(fcl.CollisionObject(a, _tf(Ta)), fcl.CollisionObject(b, _tf(Tb)), fcl.CollisionRequest(), fcl.CollisionResult()) > 0
-
-
 _REQUEST = fcl.CollisionRequest()
+
+
+def hit(a, Ta, b, Tb) -> bool:
+    """Whether two fcl shapes collide at these world poses."""
+    return _touch(fcl.CollisionObject(a, _tf(Ta)), fcl.CollisionObject(b, _tf(Tb)))
 
 
 def _touch(a: fcl.CollisionObject, b: fcl.CollisionObject) -> bool:

@@ -247,12 +247,7 @@ class CollisionChecker:
                 self._own_margins = pair_table(self.cm, self.cm.paddings())
             margins = self._own_margins
         if self._gd is None:
-            self._gd = pin.GeometryData(gm)
-            self._gd.setActiveCollisionPairs(gm, table, True)
-            self._gd.setSecurityMargins(gm, margins, True, False)
-            self._manager = pin.BroadPhaseManager_NaiveCollisionManager(self.model, gm, self._gd)
-            self._first = pin.CollisionCallBackDefault(gm, self._gd, True)
-            self._active, self._margins = table, margins
+            self._make_data(table, margins)
         if self._active is not table:
             self._gd.setActiveCollisionPairs(gm, table, True)
             self._active = table
@@ -261,6 +256,16 @@ class CollisionChecker:
             self._margins = margins
         return self._gd, self._manager
 
+    def _make_data(self, table: np.ndarray, margins: np.ndarray) -> None:
+        """This checker's one collision data and broad-phase manager, with `table`'s pairs active, padded by `margins`."""
+        gm = self.cm.geometry
+        self._gd = pin.GeometryData(gm)
+        self._gd.setActiveCollisionPairs(gm, table, True)
+        self._gd.setSecurityMargins(gm, margins, True, False)
+        self._manager = pin.BroadPhaseManager_NaiveCollisionManager(self.model, gm, self._gd)
+        self._first = pin.CollisionCallBackDefault(gm, self._gd, True)
+        self._active, self._margins = table, margins
+
     def few_collide(self, q: np.ndarray, pairs: np.ndarray, margins: np.ndarray) -> bool:
         """Whether any of a few pairs (indices) collides at q padded by `margins` (a `pair_table`), each tested on its
         own: no broad phase, whose bounding boxes of every geometry cost more than a handful of exact tests. A pair with
@@ -268,8 +273,7 @@ class CollisionChecker:
         self.checks += 1
         gm = self.cm.geometry
         if self._gd is None:
-            self._subset(pairs, margins)  # makes the collision data
-            self.forget(pairs)
+            self._make_data(active_table(self.cm, pairs), margins)
         if self._margins is not margins:
             self._gd.setSecurityMargins(gm, margins, True, False)
             self._margins, self._last = margins, None
