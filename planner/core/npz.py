@@ -4,6 +4,7 @@ entry's own uncompressed size, before a byte of its data is decompressed."""
 from __future__ import annotations
 
 import contextlib
+import io
 import math
 import zipfile
 import zlib
@@ -18,6 +19,14 @@ from planner.core.errors import InputError
 MAX_ARRAY_BYTES = 256 * 2**20  # one array: the example session's largest is 1.8 MB
 MAX_READ_BYTES = 1024 * 2**20  # every array read for one session (or from one file read alone)
 Shape = tuple[int | str | None, ...]  # an int, a name of a dimension shared between arrays, or None for any
+
+
+def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    """The bytes of an .npz file of `arrays`, each entry deflated: step results, sessions and the user cache are
+    written so (sizes in docs/benchmarks.md); files written before, stored plain, read as well."""
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return buf.getvalue()
 
 
 def shape_text(shape: Shape) -> str:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import errno
-import io
 import json
 import os
 from collections.abc import Iterator, Mapping
@@ -22,7 +21,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from planner.core.errors import InputError, RegraspError
-from planner.core.npz import Budget, read_npz
+from planner.core.npz import Budget, npz_bytes, read_npz
 
 R = TypeVar("R")
 
@@ -136,9 +135,7 @@ def save_result(result: Any, folder: Path, stem: str) -> list[str]:
             arrays[f.name] = np.ascontiguousarray(value, dtype=np.dtype(f.metadata["dtype"]))
         elif f.default is dataclasses.MISSING or value != f.default:  # a field added later, at its default: as older files have it
             rest[f.name] = value
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    atomic_write_bytes(folder / f"{stem}.npz", buf.getvalue())
+    atomic_write_bytes(folder / f"{stem}.npz", npz_bytes(arrays))
     atomic_write_text(folder / f"{stem}.json", json.dumps(rest, indent=1, default=_json_default))
     return [f"{stem}.npz", f"{stem}.json"]
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import io
 import json
 import math
 import platform
@@ -27,7 +26,7 @@ import trimesh
 from planner import __version__
 from planner.core.bounds import seed_problem
 from planner.core.errors import InputError, RegraspError
-from planner.core.npz import Budget, NpzFile
+from planner.core.npz import Budget, NpzFile, npz_bytes
 from planner.core.paths import cache_dir, file_in, plain_name
 from planner.core.results import (
     atomic_write_bytes,
@@ -74,9 +73,7 @@ def _save_meshes(folder: Path, meshes: dict[str, trimesh.Trimesh]) -> None:
         arrays[f"{i}_key"] = np.array(key)
         arrays[f"{i}_vertices"] = np.asarray(mesh.vertices, dtype=np.float64)
         arrays[f"{i}_faces"] = np.asarray(mesh.faces, dtype=np.int64)
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    atomic_write_bytes(folder / MESHES, buf.getvalue())
+    atomic_write_bytes(folder / MESHES, npz_bytes(arrays))
 
 
 def _load_meshes(folder: Path, budget: Budget) -> dict[str, trimesh.Trimesh]:

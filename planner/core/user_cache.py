@@ -9,7 +9,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import hashlib
-import io
 import json
 import logging
 import os
@@ -23,6 +22,7 @@ from typing import TypeVar
 import numpy as np
 
 from planner.core.errors import RegraspError
+from planner.core.npz import npz_bytes
 from planner.core.paths import cache_dir
 from planner.core.results import atomic_write_bytes, writing
 
@@ -89,9 +89,7 @@ def read_cached(files: Sequence[Path], read: Callable[[], T], what: str) -> T | 
 
 def save_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write arrays to an .npz atomically (two processes may fill the cache at once)."""
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    atomic_write_bytes(path, buf.getvalue())
+    atomic_write_bytes(path, npz_bytes(arrays))
 
 
 def load_arrays(path: Path, what: str | None = None, keys: Sequence[str] = ()) -> dict[str, np.ndarray] | None:
