@@ -153,3 +153,45 @@ def test_curves_the_check_accepts_are_free_by_the_oracle(default_scene, transit_
         for q in r.positions(np.linspace(0, r.duration, 200)):
             assert not oracle._environment_hits(*oracle._posed(q))
     assert accepted >= 5 and rejected >= 5  # both kinds were tried
+
+
+def test_random_shortcuts_are_attempted_most_promising_first():
+    """The random pass takes its draws a chunk at a time and attempts, on the trajectory as it is, the draw whose ramp
+    could save the most first: a bound that no ramp beats (each ramp found, and the linear program's shortest motion
+    above, take at least the slowest joint's shortest move), draws that cannot save the least gain never attempted,
+    and the draws left judged again once a shortcut changed the trajectory."""
+    from types import SimpleNamespace
+
+    from planner.motion.smoothing import CHUNK, _Run
+
+    rng = np.random.default_rng(11)
+    vmax, amax = np.array([1.0, 0.7, 1.3]), np.array([2.0, 1.5, 3.0])
+    traj = rest_to_rest(np.cumsum(rng.normal(0, 1, (8, 3)), axis=0), vmax, amax)
+    run = object.__new__(_Run)
+    run.smoother = SimpleNamespace(vmax=vmax, amax=amax, min_gain=0.02)
+    run.traj, run.drawn, run.pending, run.gains = traj, 0, None, None
+    draws = rng.random((CHUNK + 40, 2))
+    order, bounds = [], []
+    while (k := run.next_draw(draws)) is not None:
+        t1, t2 = np.sort(draws[k] * traj.duration)
+        (qa, qb), (va, vb) = traj.states(np.array([t1, t2]))
+        bound = run._gain_bounds(draws[k][None])[0]
+        r = ramp(qa, va, qb, vb, vmax, amax)
+        assert r is not None and t2 - t1 - r.duration <= bound + 1e-9, "a ramp saved more than its bound"
+        assert bound > 0
+        order.append(k)
+        bounds.append(bound)
+    first = [b for k, b in zip(order, bounds) if k < CHUNK]
+    assert len(first) and all(k < CHUNK for k in order[:len(first)]), "a chunk is done before the next is judged"
+    assert np.all(np.diff(first) <= 1e-12), "within a chunk, the most promising first"
+    every = run._gain_bounds(draws)
+    assert sorted(order) == sorted(np.flatnonzero(every > 0).tolist()), "exactly the draws that could save the least gain"
+
+    run.drawn, run.pending, run.gains = 0, None, None
+    k = run.next_draw(draws)
+    run.traj = traj.scaled(2.0)  # a kept shortcut changed the trajectory: what is left is judged on the new one
+    run.gains = None
+    k2 = run.next_draw(draws)
+    left = np.delete(np.arange(CHUNK), k)
+    again = run._gain_bounds(draws[left])
+    assert k2 == left[int(np.argmax(again))]

@@ -28,6 +28,7 @@ from planner.motion.validities import Validities
 LEAVING, REACHING = ("lift", "retreat"), ("approach", "set-down")  # contact motions starting / ending at the object
 CORNERS = (0.5, 0.25, 0.1)  # a vertex's corner cut spans this share of the segments before and after it, tried in turn
 RESTS = ("closing", "opening")  # a hand closes on the object or lets go of it: the robot rests before and after
+CHUNK = 256  # random shortcuts judged at once, the most promising attempted first
 
 
 def runs(pieces: list[Piece]) -> list[list[Piece]]:
@@ -131,12 +132,11 @@ class Smoother:
                 if run.attempt(m[k] - part * (m[k] - m[k - 1]), m[k] + part * (m[k + 1] - m[k])):
                     break
         draws = rng.random((attempts, 2))  # each random shortcut's two times, as shares of the run's duration then
-        k = run.hopeful(draws, 0)
+        k = run.next_draw(draws)
         while k is not None and run.checks < budget:
             if run.attempt(*np.sort(draws[k] * run.traj.duration)):
-                k = run.hopeful(draws, k + 1)  # the trajectory changed: the later draws are judged on the new one
-            else:
-                k = run.hopeful(draws, k + 1, run.judged)
+                run.gains = None  # the trajectory changed: the draws left are judged again on the new one
+            k = run.next_draw(draws)
         return SmoothedRun(run.pieces, run.traj, run.ends, run.checks, run.shortcuts)
 
 
@@ -154,7 +154,9 @@ class _Run:
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.checks = self.shortcuts = 0
         self.marks = np.zeros(0)
-        self.judged = np.zeros(0, dtype=bool)  # the random pass's verdicts on the draws after the last one it attempted
+        self.drawn = 0  # the random pass: draws taken into a chunk so far, the chunk's draws not attempted yet and
+        self.pending: np.ndarray | None = None  # the most each could save (None: to judge on the trajectory as it is)
+        self.gains: np.ndarray | None = None
 
     def validities(self, t1: float, t2: float, ramp_moves: np.ndarray) -> tuple[Validity, ...] | None:
         """What checks a ramp from t1 to t2: its piece's own validity, or the blend of the pieces it spans (also for one
@@ -174,26 +176,36 @@ class _Run:
                                    self.smoother.blend(self.pieces[i: j + 1], self.strict, moving))
         return self.checks_of[key]
 
-    def hopeful(self, draws: np.ndarray, k: int, judged: np.ndarray | None = None) -> int | None:
-        """The first of the draws from k on (pairs of shares of the duration) whose ramp could save time on the
-        trajectory as it is: where the slowest joint's shortest move takes less than the span less the least gain, as
-        `attempt` asks first (judged a chunk at a time, all at once; `judged`: the verdicts of the draws from k on,
-        made on this trajectory before). None when no draw is left that could."""
+    def next_draw(self, draws: np.ndarray) -> int | None:
+        """The next random shortcut to attempt: among the draws of the chunk being tried (pairs of shares of the
+        duration, CHUNK at a time, in order), the one whose ramp could save the most on the trajectory as it is, by a
+        bound that `attempt` never beats (the slowest joint's shortest move); None when no draw is left that could
+        save the least gain."""
+        while True:
+            if self.pending is None or not len(self.pending):
+                if self.drawn >= len(draws):
+                    return None
+                self.pending, self.gains = np.arange(self.drawn, min(self.drawn + CHUNK, len(draws))), None
+                self.drawn += CHUNK
+            if self.gains is None:
+                self.gains = self._gain_bounds(draws[self.pending])
+                keep = self.gains > 0
+                self.pending, self.gains = self.pending[keep], self.gains[keep]
+                continue
+            best = int(np.argmax(self.gains))
+            k = int(self.pending[best])
+            self.pending, self.gains = np.delete(self.pending, best), np.delete(self.gains, best)
+            return k
+
+    def _gain_bounds(self, draws: np.ndarray) -> np.ndarray:
+        """Per draw, the most a ramp between its two times could save (0 where it cannot save the least gain)."""
         p = self.smoother
-        chunk = 256
-        while k < len(draws):
-            if judged is None or not len(judged):
-                times = np.sort(draws[k: k + chunk] * self.traj.duration, axis=1)
-                (qa, va), (qb, vb) = (self.traj.states(times[:, i]) for i in (0, 1))
-                span = times[:, 1] - times[:, 0] - p.min_gain
-                fastest = min_times(qb - qa, va, vb, p.vmax, p.amax).max(axis=1, initial=0.0)
-                judged = (span > 0) & (fastest < span) & (fastest > TINY)
-            hits = np.flatnonzero(judged)
-            if len(hits):
-                self.judged = judged[hits[0] + 1:]
-                return k + int(hits[0])
-            k, judged = k + len(judged), None
-        return None
+        times = np.sort(draws * self.traj.duration, axis=1)
+        (qa, va), (qb, vb) = (self.traj.states(times[:, i]) for i in (0, 1))
+        span = times[:, 1] - times[:, 0]
+        fastest = min_times(qb - qa, va, vb, p.vmax, p.amax).max(axis=1, initial=0.0)
+        hopeful = (span - p.min_gain > fastest) & (fastest > TINY)
+        return np.where(hopeful, span - fastest, 0.0)
 
     def attempt(self, t1: float, t2: float) -> bool:
         """Whether the ramp from the state at t1 to the one at t2 is faster and valid; then it replaces that span, and
