@@ -154,9 +154,9 @@ class _Run:
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.checks = self.shortcuts = 0
         self.marks = np.zeros(0)
-        self.drawn = 0  # the random pass: draws taken into a chunk so far, the chunk's draws not attempted yet and
-        self.pending: np.ndarray | None = None  # the most each could save (None: to judge on the trajectory as it is)
-        self.gains: np.ndarray | None = None
+        self.drawn = 0  # the random pass: the draws its chunks have taken so far,
+        self.pending: np.ndarray | None = None  # the chunk's draws not attempted yet,
+        self.gains: np.ndarray | None = None  # and the most each could save (None: to judge on the trajectory as it is)
 
     def validities(self, t1: float, t2: float, ramp_moves: np.ndarray) -> tuple[Validity, ...] | None:
         """What checks a ramp from t1 to t2: its piece's own validity, or the blend of the pieces it spans (also for one
