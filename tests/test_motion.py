@@ -192,3 +192,15 @@ def test_same_seed_same_motion(planned, tmp_path):
     again = _planned(tmp_path / "b")
     for name in ("motion.npz", "motion.json"):
         assert (session.folder / name).read_bytes() == (again.folder / name).read_bytes()
+
+
+def test_the_smoothing_makes_no_more_checks_than_its_budget(tmp_path):
+    """A ramp whose curve could need more checks than its run has left is not checked: the motion's smoothing checks
+    stay within `smooth_checks`, even when that budget is small (the passes test it before each attempt, the curve's
+    count bounds the attempt)."""
+    shutil.copytree(EXAMPLE, tmp_path / "example")
+    session = Session.open(tmp_path / "example").branch(tmp_path / "small", "motion")
+    run_pipeline(session, params={"motion": {"smooth_checks": 1500}})
+    motion = session.result("motion")
+    spent = sum(phase["smoothing_checks"] for phase in motion.phases)
+    assert 0 < spent <= 1500

@@ -160,6 +160,7 @@ class SegmentChecker:
         self._leading_rows: dict[tuple[str, bytes], np.ndarray] = {}
         self.coarse = int(coarse)
         self._coarse_margins = pair_table(cm, paddings + (self.coarse - 1) * allow) if coarse > 1 else None
+        self._last_clock: tuple | None = None  # (curve, subset, its clock): see _clock
 
     def in_collision(self, q: np.ndarray, subset: str, coarse: bool = False) -> bool:
         """One check of q over a subset, at the paddings (or the coarse ones)."""
@@ -221,14 +222,28 @@ class SegmentChecker:
         n = int(self._steps(sweep)[0])
         return self._first_hit(n, lambda s: qa + s * dq, subset, ends, self.pair_levels(subset, sweep[0], n))
 
+    def most_curve_checks(self, curve: Curve, subset: str) -> int:
+        """The most checks a curve's check can make: its configurations, and coarse first (see two_level) each coarse
+        one a second time at the paddings."""
+        n = int(np.ceil(self._clock(curve, subset)[-1][-1])) + 1
+        grid = self._grid(n)
+        return n if grid == n else grid + (grid - 1) // self.coarse + 1
+
+    def _clock(self, curve: Curve, subset: str) -> tuple[np.ndarray, ...]:
+        """(breakpoints, speed bounds, moving joints, the clock's rate per part, the clock at the breakpoints) of a curve
+        (see the module), kept for the last curve asked about: its count, then its check."""
+        if self._last_clock is None or self._last_clock[0] is not curve or self._last_clock[1] != subset:
+            t, bound = curve.speed_bounds()
+            moving = np.flatnonzero(bound.max(axis=0) > 0)
+            rates = np.einsum("kj,rj->kr", bound[:, moving], self._leading(subset, moving)).max(axis=1)  # no BLAS threads in a worker
+            clock = np.concatenate([[0.0], np.cumsum(rates * np.diff(t))])
+            self._last_clock = (curve, subset, (t, bound, moving, rates, clock))
+        return self._last_clock[2]
+
     def curve_first_hit(self, curve: Curve, subset: str, ends: bool = True) -> np.ndarray | None:
         """The first configuration of a curve, in checking order, whose check fails; None when all pass (see the
         module: as many checks as a straight segment moving as far; `ends=False`: both ends are known free)."""
-        t, bound = curve.speed_bounds()
-        moving = np.flatnonzero(bound.max(axis=0) > 0)
-        rates = np.einsum("kj,rj->kr", bound[:, moving], self._leading(subset, moving)).max(axis=1)  # no BLAS threads in a worker
-        clock = np.concatenate([[0.0], np.cumsum(rates * np.diff(t))])
-
+        t, bound, moving, rates, clock = self._clock(curve, subset)
         n = int(np.ceil(clock[-1])) + 1
         grid = self._grid(n)  # every parameter a check may read, evaluated at once
         q = curve.positions(np.interp(np.linspace(0.0, clock[-1], grid), clock, t))

@@ -98,8 +98,11 @@ class Validity:
         """Every check of the straight segment passes (`ends=False`: both ends are known valid)."""
         return self.seg.segment_free(qa, qb, self.subset, ends)
 
-    def curve_valid(self, curve: Curve, ends: bool = True) -> bool:
-        """Every check of a timed curve passes (see segments.py; `ends=False`: both ends are known valid)."""
+    def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None) -> bool:
+        """Every check of a timed curve passes (see segments.py; `ends=False`: both ends are known valid); False, without
+        a check, for a curve whose check could make more than `most` checks."""
+        if most is not None and self.seg.most_curve_checks(curve, self.subset) > most:
+            return False
         return self.seg.curve_first_hit(curve, self.subset, ends) is None
 
     def samples(self, qa: np.ndarray, qb: np.ndarray, subset: str | None = None) -> int:
@@ -163,9 +166,9 @@ class Graded:
         dq = qb - qa
         return two_level(n, m, lambda s, coarse: not (self.coarse if coarse else self.fine).state_valid(qa + s * dq), ends) is None
 
-    def curve_valid(self, curve: Curve, ends: bool = True) -> bool:
+    def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None) -> bool:
         """A timed curve checked at the fine paddings throughout (see Validity.curve_valid)."""
-        return self.fine.curve_valid(curve, ends)
+        return self.fine.curve_valid(curve, ends, most)
 
 
 KINDS = ("env", "self", "object")

@@ -109,13 +109,15 @@ class Smoother:
         detours, each ramp checked once); around each vertex left (from halfway along the segment before to halfway
         along the one after, else a quarter, a tenth of the way: short ramps, few checks, no stop left where one is
         valid); between random times, at most
-        `attempts` of them. Each pass stops once the run's collision checks reach `budget`."""
+        `attempts` of them. Each pass stops once the run's collision checks reach `budget`, and no ramp is checked
+        whose curve needs more checks than the budget has left."""
         timed = [(p, rest_to_rest(p.path, self.vmax, self.amax)) for p in pieces]
         timed = [(p, t) for p, t in timed if t is not None]
         if not timed:
             return SmoothedRun([], None, np.zeros(0), 0, 0)
         run = _Run(self, [p for p, _ in timed], Trajectory.joined([t for _, t in timed]),
                    np.cumsum([t.duration for _, t in timed]))
+        run.budget = budget
         run.marks = np.array([0.0] + [float(t) for t, v in zip(run.traj.t[1:-1], run.traj.v[1:]) if not v.any()]
                              + [run.traj.duration])  # the vertices, where the robot rests
         i = 0
@@ -153,6 +155,7 @@ class _Run:
         self.strict = next((p.situation for p in pieces if not p.situation.touching and not p.situation.support),
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.checks = self.shortcuts = 0
+        self.budget = 0  # the collision checks the run may make (see Smoother.smooth)
         self.marks = np.zeros(0)
         self.drawn = 0  # the random pass: the draws its chunks have taken so far,
         self.pending: np.ndarray | None = None  # the chunk's draws not attempted yet,
@@ -221,7 +224,9 @@ class _Run:
         if validities is None:
             return False
         before = sum(v.checks for v in validities)
-        ok = all(v.curve_valid(shortcut) for v in validities)
+        # a curve that needs more checks than the run has left is not checked: the budget bounds the work
+        ok = all(v.curve_valid(shortcut, most=self.budget - self.checks - (sum(u.checks for u in validities) - before))
+                 for v in validities)
         self.checks += sum(v.checks for v in validities) - before
         if not ok:
             return False
