@@ -116,8 +116,7 @@ class Smoother:
         if not timed:
             return SmoothedRun([], None, np.zeros(0), 0, 0)
         run = _Run(self, [p for p, _ in timed], Trajectory.joined([t for _, t in timed]),
-                   np.cumsum([t.duration for _, t in timed]))
-        run.budget = budget
+                   np.cumsum([t.duration for _, t in timed]), budget)
         run.marks = np.array([0.0] + [float(t) for t, v in zip(run.traj.t[1:-1], run.traj.v[1:]) if not v.any()]
                              + [run.traj.duration])  # the vertices, where the robot rests
         i = 0
@@ -146,8 +145,9 @@ class _Run:
     """One run being smoothed: its trajectory, the times its pieces end, times to follow (`marks`, mapped with each
     shortcut), the validities made so far and the figures."""
 
-    def __init__(self, smoother: Smoother, pieces: list[Piece], traj: Trajectory, ends: np.ndarray):
+    def __init__(self, smoother: Smoother, pieces: list[Piece], traj: Trajectory, ends: np.ndarray, budget: int):
         self.smoother, self.pieces, self.traj, self.ends = smoother, pieces, traj, ends
+        self.budget = budget  # the collision checks the run may make
         self.moves = np.array([np.ptp(p.path, axis=0) > 0 for p in pieces])  # the joints each piece moves
         robot = smoother.validities.robot
         self.fingers = np.isin(np.arange(robot.nq), np.concatenate([robot.hand_idx[a] for a in robot.spec.arm_names]))
@@ -155,7 +155,6 @@ class _Run:
         self.strict = next((p.situation for p in pieces if not p.situation.touching and not p.situation.support),
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.checks = self.shortcuts = 0
-        self.budget = 0  # the collision checks the run may make (see Smoother.smooth)
         self.marks = np.zeros(0)
         self.drawn = 0  # the random pass: the draws its chunks have taken so far,
         self.pending: np.ndarray | None = None  # the chunk's draws not attempted yet,
@@ -223,13 +222,12 @@ class _Run:
         validities = self.validities(t1, t2, np.any(shortcut.v != 0, axis=0) | np.any(shortcut.a != 0, axis=0))
         if validities is None:
             return False
-        before = sum(v.checks for v in validities)
-        # a curve that needs more checks than the run has left is not checked: the budget bounds the work
-        ok = all(v.curve_valid(shortcut, most=self.budget - self.checks - (sum(u.checks for u in validities) - before))
-                 for v in validities)
-        self.checks += sum(v.checks for v in validities) - before
-        if not ok:
-            return False
+        for v in validities:  # a curve that could need more checks than the run has left is not checked
+            before = v.checks
+            valid = v.curve_valid(shortcut, most=self.budget - self.checks)
+            self.checks += v.checks - before
+            if not valid:
+                return False
         self.shortcuts += 1
         gain = t2 - t1 - shortcut.duration
 
