@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import os
 import re
 import subprocess
@@ -165,9 +166,11 @@ def test_bad_suite_fields_are_named_before_any_folder_is_made(tmp_path, capsys):
 @pytest.mark.slow
 def test_an_existing_suite_is_kept_without_resume_or_force(local_run, suite_file, capsys):
     before = (local_run / "suite.json").read_bytes()
+    level = logging.getLogger("regrasp.cache").level
     assert main(["suite", str(suite_file), "--out", str(local_run), "--until", UNTIL]) == 2
     assert "already holds a suite; use --resume to continue it, or --force to replace it" in capsys.readouterr().err
     assert (local_run / "suite.json").read_bytes() == before
+    assert logging.getLogger("regrasp.cache").level == level, "the suite left its log level behind for the caller"
 
 
 def test_a_cache_entry_is_computed_by_one_process_at_a_time(tmp_path):

@@ -24,10 +24,15 @@ def _cmd_suite(args: argparse.Namespace) -> int:
     local = args.workers or os.cpu_count() or 1
     executor = RayExecutor(args.ray) if args.ray is not None else LocalExecutor(local)
     say = lambda message: print(message, file=sys.stderr, flush=True)
-    logging.getLogger("regrasp.cache").setLevel(logging.INFO)  # a line per cache entry built (local workers inherit it): a cold
-    # suite's first tasks wait for the grasp lists and roadmaps, and its log shows which
+    cache_log = logging.getLogger("regrasp.cache")
+    level = cache_log.level
+    cache_log.setLevel(logging.INFO)  # a line per cache entry built (local workers inherit it): a cold suite's first tasks
+    # wait for the grasp lists and roadmaps, and its log shows which; the level is the caller's again after the run
     out = Path(args.out)
-    run = run_suite(spec, out, executor, until, args.resume, args.force, local, say)
+    try:
+        run = run_suite(spec, out, executor, until, args.resume, args.force, local, say)
+    finally:
+        cache_log.setLevel(level)
     report = write_report(run.data, spec, load_task(spec.base_task).environment, out)
     data = run.data
     print(f"suite {spec.name}: {data['succeeded']} of {data['tasks']} tasks succeeded (success_rate {data['success_rate']:.3f}) "
