@@ -238,9 +238,12 @@ def fits(profile: Profile, clearance: dict[str, float]) -> bool:
 
 
 def _fit(padding: float, keep: float, have: float) -> float:
-    """A padding lowered, when the clearance `have` is smaller, to 90 % of it (never to or below the clearance `keep`
-    it guarantees): checks stay as sparse as a motion's ends allow, the guarantee unchanged."""
-    return padding if 0.9 * have >= padding or 0.9 * have <= keep else 0.9 * have
+    """A padding lowered, when the clearance `have` is smaller, to keep 90 % of its margin over the clearance `keep` it
+    guarantees (and only where 90 % of `have` exceeds `keep`, see `fits`): checks stay as sparse as a motion's ends allow,
+    the guarantee unchanged. The margin left between checks is 90 % of the end's, never below a tenth of `keep`: 90 % of
+    `have` itself could leave a hair's breadth (an end 1.2 mm past its clearance checked every 0.16 mm)."""
+    lowered = keep + 0.9 * (have - keep)
+    return padding if lowered >= padding or 0.9 * have <= keep else lowered
 
 
 def make_validity(cm: CollisionModel, profile: Profile, subset: str = "all", known_radii: np.ndarray | None = None,
