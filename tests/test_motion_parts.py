@@ -715,7 +715,8 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
     """The robot at its initial configuration, the statuette standing 3 mm beside its first arm's palm (moved out from it
     sideways, away from the other palm, by bisection): motions out of there checked graded cost a
     fraction of the checks at paddings fitted to the 3 mm throughout, and each one it passes keeps the hand off the
-    statuette by the independent check at ten times the fitted resolution. Its paddings must be ordered."""
+    statuette, and the robot off itself and the obstacles, by the independent check at ten times the fitted resolution.
+    Its paddings must be ordered."""
     from planner.collision.situation import Situation
     from planner.collision.validity import Graded
     from planner.collision.with_object import OBJECT
@@ -769,6 +770,7 @@ def test_graded_checks_densely_only_beside_a_tight_end(example):
             passed += 1
             for s in np.linspace(0.0, 1.0, 10 * near.samples(q, end, "object")):  # the pairs fitted to the 3 mm
                 assert not oracle.object_hits(q + s * (end - q), situation.pose)
+                assert not oracle.robot_collisions(q + s * (end - q))  # the others, tested only at the coarse spacing
     assert passed, "some motions must pass"
     assert spent["graded"] < 0.5 * spent["fitted"], spent
 

@@ -340,3 +340,41 @@ def test_two_level_never_passes_a_segment_that_comes_nearer_than_the_clearance()
             assert passed, f"n={n} m={m}: failed though the pair stays beyond its padding"
         if nearest >= coarse_padding:
             assert sorted(calls) == [(j / (n - 1), True) for j in range(n)]
+
+
+def test_two_level_tests_only_the_finer_pairs_between_coarse_configurations():
+    """Analytic, two pairs, clearance 0: pair A padded 1 finely and (m - 1) / (n - 1) coarsely (fitted to a tight end),
+    pair B padded alike at both (its dip as steep as the coarse grid allows). Between the coarse configurations only A
+    is tested (`between`), and never at a coarse one: a segment passes only if both keep their clearance, since B passed
+    at its padding at every coarse configuration, whether that one failed coarse or not."""
+    rng = np.random.default_rng(8)
+    passed_with_b_near = 0
+    for _ in range(3000):
+        n = int(rng.integers(2, 40))
+        m = n + int(rng.integers(1, 400))
+        coarse_a, pad_b = (m - 1) / (n - 1), rng.uniform(0.5, 3.0)
+        s_a, s_b = rng.uniform(-0.2, 1.2, 2)
+        depth_a, depth_b = rng.uniform(-0.5, 1.5 * coarse_a), rng.uniform(-0.5, 1.5 * pad_b)
+
+        def d_a(s):
+            return depth_a + 2.0 * (m - 1) * abs(s - s_a)
+
+        def d_b(s):
+            return depth_b + 2.0 * pad_b * (n - 1) * abs(s - s_b)
+
+        between_calls = []
+
+        def hits(s, coarse):
+            return d_a(s) < (coarse_a if coarse else 1.0) or d_b(s) < pad_b
+
+        def between(s):
+            between_calls.append(s)
+            return d_a(s) < 1.0
+
+        grid = np.linspace(0.0, 1.0, 20 * m)
+        near_a, near_b = min(d_a(s) for s in grid), min(d_b(s) for s in grid)
+        if two_level(n, m, hits, True, between) is None:
+            assert near_a >= 0.0 and near_b >= 0.0, f"n={n} m={m}: passed {near_a:.3f} / {near_b:.3f} from the clearance"
+            passed_with_b_near += near_b < pad_b
+        assert not any(abs(s * (n - 1) - round(s * (n - 1))) < 1e-9 for s in between_calls), "a coarse one tested as between"
+    assert passed_with_b_near, "some segments must pass with B inside its padding between two coarse configurations"

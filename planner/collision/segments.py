@@ -167,6 +167,14 @@ class SegmentChecker:
         self.checks += 1
         return self.checker.in_collision(q, self.cm.subsets[subset], margins=self._coarse_margins if coarse else self._margins)
 
+    def pairs_free(self, q: np.ndarray, pairs: np.ndarray) -> bool:
+        """One check of q over some pairs (indices, an array kept by the caller: its tables are kept by its identity) at
+        the paddings: each pair tested on its own when they are few (see CollisionChecker.few_collide)."""
+        self.checks += 1
+        if len(pairs) <= FEW_PAIRS:
+            return not self.checker.few_collide(q, pairs, self._margins)
+        return not self.checker.in_collision(q, pairs, margins=self._margins)
+
     def colliding_pairs(self, q: np.ndarray, subset: str) -> list[tuple[str, str]]:
         """The subset's pairs colliding at q at the paddings, by geometry name (for messages)."""
         return self.checker.colliding_pairs(q, self.cm.subsets[subset], self._margins)
@@ -293,15 +301,12 @@ class SegmentChecker:
         """_first_hit with pair p checked only at the multiples of 2^levels[p] (and the ends), coarsest level first."""
         for j, indices in level_order(n, int(levels.max())):
             due = levels <= j
-            few = int(due.sum()) <= FEW_PAIRS
-            pairs = self.cm.subsets[subset][due] if few else self._level_subset(subset, due)
+            pairs = self.cm.subsets[subset][due] if int(due.sum()) <= FEW_PAIRS else self._level_subset(subset, due)
             for i in indices:
                 if not ends and (i == 0 or i == n - 1):
                     continue
                 q = at(i / (n - 1))
-                self.checks += 1
-                if (self.checker.few_collide(q, pairs, self._margins) if few else
-                        self.checker.in_collision(q, pairs, margins=self._margins)):
+                if not self.pairs_free(q, pairs):
                     return q
         return None
 
@@ -341,13 +346,17 @@ def coarse_first(n: int, k: int, hits: Callable[[float, bool], bool], ends: bool
     return two_level(m + 1, m * k + 1, hits, ends)
 
 
-def two_level(n: int, m: int, hits: Callable[[float, bool], bool], ends: bool = True) -> float | None:
+def two_level(n: int, m: int, hits: Callable[[float, bool], bool], ends: bool = True,
+              between: Callable[[float], bool] | None = None) -> float | None:
     """Where a segment fails, checked at n evenly spaced configurations at coarse paddings and, only within the
     intervals next to one that fails there, at the m (> n) evenly spaced configurations of its fine paddings; None
     when it passes. `hits(s, coarse)`: whether the check at parameter s fails at the coarse or the fine paddings. The
     coarse ones go in van der Corput order, one that fails there at once at the fine paddings too (a collision is found
     early). Each interval between two checked configurations is then as short as the paddings both its ends passed at
-    need. `ends=False`: both ends are known to pass at the fine paddings."""
+    need. `ends=False`: both ends are known to pass at the fine paddings. `between(s)`: whether a configuration strictly
+    inside such an interval fails (default: hits(s, False)): there only the pairs padded less finely than coarsely need a
+    test, as every other pair passed at its padding at the coarse configurations."""
+    between = between or (lambda s: hits(s, False))
     clear = np.zeros(n, dtype=bool)
     for j in (van_der_corput(n) * (n - 1)).round().astype(int):
         s = j / (n - 1)
@@ -356,6 +365,6 @@ def two_level(n: int, m: int, hits: Callable[[float, bool], bool], ends: bool = 
             return s
     for j in np.flatnonzero(~(clear[:-1] & clear[1:])):
         for i in range(j * (m - 1) // (n - 1) + 1, -(-(j + 1) * (m - 1) // (n - 1))):  # strictly inside
-            if hits(i / (m - 1), False):
+            if between(i / (m - 1)):
                 return i / (m - 1)
     return None

@@ -19,6 +19,7 @@ import numpy as np
 from planner.collision.checker import CollisionChecker, CollisionModel, pair_table
 from planner.collision.segments import Curve, SegmentChecker, geometry_radii, two_level
 from planner.core.errors import RegraspError
+from planner.core.results import frozen
 
 
 class StateValidity(Protocol):
@@ -149,6 +150,11 @@ class Graded:
             raise ValueError("a graded validity needs one model's pairs and subset at two sets of paddings")
         if self.coarse.profile.name != self.fine.profile.name or np.any(a.paddings() < b.paddings()):
             raise ValueError("a graded validity's coarse paddings must be at least its fine ones, for one profile")
+        pairs = b.subsets[self.fine.subset]
+        finer = b.paddings()[pairs] < a.paddings()[pairs]
+        if b.twins is not None:
+            finer &= b.twins[pairs] < 0  # a screening pair is tested with the pair it stands for (few_collide)
+        object.__setattr__(self, "_finer", frozen(pairs[finer]))
 
     @property
     def checks(self) -> int:
@@ -164,7 +170,8 @@ class Graded:
         if m <= n:
             return self.fine.motion_valid(qa, qb, ends)
         dq = qb - qa
-        return two_level(n, m, lambda s, coarse: not (self.coarse if coarse else self.fine).state_valid(qa + s * dq), ends) is None
+        return two_level(n, m, lambda s, coarse: not (self.coarse if coarse else self.fine).state_valid(qa + s * dq), ends,
+                         lambda s: not self.fine.seg.pairs_free(qa + s * dq, self._finer)) is None
 
     def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None) -> bool:
         """A timed curve checked at the fine paddings throughout (see Validity.curve_valid)."""
