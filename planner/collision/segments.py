@@ -168,8 +168,9 @@ class SegmentChecker:
         return self.checker.in_collision(q, self.cm.subsets[subset], margins=self._coarse_margins if coarse else self._margins)
 
     def pairs_free(self, q: np.ndarray, pairs: np.ndarray) -> bool:
-        """One check of q over some pairs (indices, an array kept by the caller: its tables are kept by its identity) at
-        the paddings: each pair tested on its own when they are few (see CollisionChecker.few_collide)."""
+        """One check of q over some pairs (indices) at the paddings: each tested on its own when they are few (see
+        CollisionChecker.few_collide), else as a subset, whose tables the checker keeps by the array's identity (see
+        _level_subset, which lets them go)."""
         self.checks += 1
         if len(pairs) <= FEW_PAIRS:
             return not self.checker.few_collide(q, pairs, self._margins)

@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from planner.collision.checker import CollisionChecker, CollisionModel, pair_table
-from planner.collision.segments import Curve, SegmentChecker, geometry_radii, two_level
+from planner.collision.segments import FEW_PAIRS, Curve, SegmentChecker, geometry_radii, two_level
 from planner.core.errors import RegraspError
 from planner.core.results import frozen
 
@@ -148,13 +148,16 @@ class Graded:
         a, b = self.coarse.seg.cm, self.fine.seg.cm
         if a.ends.shape != b.ends.shape or np.any(a.ends != b.ends) or self.coarse.subset != self.fine.subset:
             raise ValueError("a graded validity needs one model's pairs and subset at two sets of paddings")
-        if self.coarse.profile.name != self.fine.profile.name or np.any(a.paddings() < b.paddings()):
+        coarse, fine = a.paddings(), b.paddings()
+        if self.coarse.profile.name != self.fine.profile.name or np.any(coarse < fine):
             raise ValueError("a graded validity's coarse paddings must be at least its fine ones, for one profile")
         pairs = b.subsets[self.fine.subset]
-        finer = b.paddings()[pairs] < a.paddings()[pairs]
+        finer = fine[pairs] < coarse[pairs]
         if b.twins is not None:
             finer &= b.twins[pairs] < 0  # a screening pair is tested with the pair it stands for (few_collide)
-        object.__setattr__(self, "_finer", frozen(pairs[finer]))
+        # what needs a test between two coarse configurations (see two_level): a few pairs, else the whole subset (a
+        # checker keeps the tables of every other set of pairs it is given)
+        object.__setattr__(self, "_finer", frozen(pairs[finer]) if np.count_nonzero(finer) <= FEW_PAIRS else None)
 
     @property
     def checks(self) -> int:
@@ -170,8 +173,10 @@ class Graded:
         if m <= n:
             return self.fine.motion_valid(qa, qb, ends)
         dq = qb - qa
+        finer = self._finer
+        between = None if finer is None else lambda s: not self.fine.seg.pairs_free(qa + s * dq, finer)
         return two_level(n, m, lambda s, coarse: not (self.coarse if coarse else self.fine).state_valid(qa + s * dq), ends,
-                         lambda s: not self.fine.seg.pairs_free(qa + s * dq, self._finer)) is None
+                         between) is None
 
     def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None) -> bool:
         """A timed curve checked at the fine paddings throughout (see Validity.curve_valid)."""
