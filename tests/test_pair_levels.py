@@ -271,3 +271,48 @@ def test_a_curve_tests_each_pair_often_enough_for_its_own_motion(default_scene, 
                 moved_by = float(np.linalg.norm(world[a:b + 1] - world[a], axis=2).max())
                 assert moved_by <= 2 * allow[k] + 2e-4, f"pair {k} moved {moved_by:.4f} m between two of its tests"
     assert tested_sparsely, "no curve had a pair tested less densely than the one that sets its count"
+
+
+def test_a_shoulder_swing_is_checked_neither_too_sparsely_nor_twice_too_densely(default_scene, padded, monkeypatch):
+    """The displacement bound is nearly tight for a shoulder swinging the whole arm: along a rest-to-rest swing of each
+    arm's first two joints (a curve, timed as the smoothing's are), every pair tested at every check moves between two
+    consecutive checks (measured by kinematics on the hull vertices) at most twice its margin over its clearance, and
+    some pair more than half of that. So a schedule twice as sparse as the bound asks would break the first assertion:
+    the oracle of the tests above, which often finds displacements far below the bound, is not blind to one."""
+    from planner.motion.trajectory import rest_to_rest
+
+    cm = padded
+    seg = SegmentChecker(cm, 0.01, 0.004)
+    checks = _recording(seg, monkeypatch)
+    robot = default_scene.robot
+    model, gm = robot.model, cm.geometry
+    data, gd = model.createData(), pin.GeometryData(gm)
+    allow = cm.paddings() - np.where(np.isin(np.arange(len(cm.ends)), cm.subsets["env"]), 0.01, 0.004)
+    efficiency = []
+    for j in [robot.arm_idx[a][i] for a in robot.spec.arm_names for i in (0, 1)]:
+        qa = robot.q_rest.copy()
+        qb = qa.copy()
+        qb[j] = qa[j] + 1.0 if qa[j] + 1.0 <= robot.upper[j] else qa[j] - 1.0
+        curve = rest_to_rest(np.stack([qa, qb]), np.ones(robot.nq), np.full(robot.nq, 2.0))
+        checks.clear()
+        assert seg.curve_first_hit(curve, "env") is None, "the swing must be free for every check to be made"
+        angles = np.sort([q[j] for q, _ in checks])
+        every = set.intersection(*[set(t.tolist()) for _, t in checks])
+        for k in every:
+            moved, frame = (int(g) for g in cm.ends[k])
+            if _points(gm.geometryObjects[moved].geometry) is None:
+                moved, frame = frame, moved
+            pts = _points(gm.geometryObjects[moved].geometry)
+            worst = 0.0
+            for a, b in zip(angles[:-1], angles[1:]):
+                seen = []
+                for x in np.linspace(a, b, 6):
+                    q = qa.copy()
+                    q[j] = x
+                    pin.updateGeometryPlacements(model, data, gm, gd, q)
+                    rel = np.linalg.inv(gd.oMg[frame].homogeneous) @ gd.oMg[moved].homogeneous
+                    seen.append(pts @ rel[:3, :3].T + rel[:3, 3])
+                worst = max(worst, max(float(np.linalg.norm(p - seen[0], axis=1).max()) for p in seen))
+            efficiency.append(worst / (2 * allow[k]))
+    assert max(efficiency) <= 1.0 + 1e-6, f"a pair moved {max(efficiency):.2f} of its allowed displacement between two checks"
+    assert max(efficiency) > 0.55, f"the bound is looser than a 2x-sparser schedule could hide ({max(efficiency):.2f})"
