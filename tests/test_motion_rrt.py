@@ -151,3 +151,15 @@ def test_bad_inputs_raise_value_error(change, words):
     with pytest.raises(ValueError, match=words):
         rrt_connect(args["lower"], args["upper"], state_valid, motion_valid, args["start"], args["goal"],
                     seed=args["seed"], time_limit=args["time_limit"], range_=args["range_"])
+
+
+def test_a_reconnection_across_an_invalid_span_may_end_at_any_later_node_of_the_path():
+    """Across the invalid span of the last path (its first and last invalid edges), the reconnection starts at the valid
+    node before it and may end at the first valid node after it or any later one, the goal included: where no detour
+    rejoins the path just past the span (a vase beside the exchange on the shelf task), RRTConnect joins it further on."""
+    from planner.motion.transit import LazyTransit
+
+    transit = object.__new__(LazyTransit)  # the span's case reads nothing of the query
+    path = [40, 7, 12, 3, 25, 41]  # start 40, goal 41; edges 7-12 and 12-3 invalid
+    assert transit._reconnection((path, (1, 2)), 40, 41) == (7, [3, 25, 41])
+    assert transit._reconnection((path, (4, 4)), 40, 41) == (25, [41])

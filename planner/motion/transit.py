@@ -7,12 +7,13 @@ invalid). The path found is then validated in the phase from both ends inward,
 each side stopping at its first invalid edge: roadmap nodes and edges only over the pairs the
 offline roadmap did not check ('changed': the object, a hand holding it), edges nobody checked
 offline (connections, earlier reconnections) over every pair. Invalid elements are marked and the
-search runs again. When the searches are used up, the valid nodes bounding the invalid span of the
-last path are reconnected with OMPL's RRTConnect; when the graph cannot join the ends at all, the
-end whose component is smaller is reconnected to the other end and the nearest valid nodes of its
-component (the goal tree grows from each: where the ends are nearer each other than the graph, it
-joins them directly). What RRTConnect finds is added to the graph, as the paper enriches its PRM
-with RRT trees. The single-query baseline (`rrt_transit`) runs RRTConnect alone between the ends.
+search runs again. When the searches are used up, OMPL's RRTConnect reconnects the valid node before
+the invalid span of the last path to the nodes after it (the goal tree grows from each, the goal
+included); when the graph cannot join the ends at all, the end whose component is smaller is
+reconnected to the other end and the nearest valid nodes of its component (the goal tree grows from
+each: where the ends are nearer each other than the graph, it joins them directly). What RRTConnect
+finds is added to the graph, as the paper enriches its PRM with RRT trees. The single-query
+baseline (`rrt_transit`) runs RRTConnect alone between the ends.
 """
 from __future__ import annotations
 
@@ -159,11 +160,13 @@ class LazyTransit:
 
     def _reconnection(self, last: tuple[list[int], tuple[int, int]] | None, start: int, goal: int) -> tuple[int, list[int]]:
         """The valid node a reconnection starts from and the valid nodes it may end at: across the invalid span of the
-        last path; else (the ends' components apart) from the end whose component is smaller to the other end and the
-        valid nodes of its component nearest it, so the tree joins the other end or the graph wherever it reaches first."""
+        last path, to the first valid node after it or any later one of the path, the goal included (a span that no
+        detour crosses near its end is crossed further along, or straight to the goal, as RRTConnect alone would); else
+        (the ends' components apart) from the end whose component is smaller to the other end and the valid nodes of its
+        component nearest it, so the tree joins the other end or the graph wherever it reaches first."""
         if last is not None:
             path, (first, final) = last
-            return path[first], [path[final + 1]]
+            return path[first], list(path[final + 1:])
         comp = self.status.components()
         size = np.bincount(comp)
         root, other = (start, goal) if size[comp[start]] <= size[comp[goal]] else (goal, start)
