@@ -191,8 +191,8 @@ class Playback:
                         pos = 0.0
                     shown = sample_at(r.t, pos)
                     self.seek(shown)  # draws the sample (see show)
-                    if shown < len(r.t) - 1:
-                        continue
+                    if pos < r.duration:  # on until the end's time, not the last sample's (the nearest within half a
+                        continue  # sample of the end): a loop starts again at the end, never stops short of it
                     self.playing = False
                 break
             if generation == self._generation:  # neither removed nor restarted since the last frame
