@@ -163,3 +163,66 @@ def test_a_reconnection_across_an_invalid_span_may_end_at_any_later_node_of_the_
     path = [40, 7, 12, 3, 25, 41]  # start 40, goal 41; edges 7-12 and 12-3 invalid
     assert transit._reconnection((path, (1, 2)), 40, 41) == (7, [3, 25, 41])
     assert transit._reconnection((path, (4, 4)), 40, 41) == (25, [41])
+
+
+class _Walls:
+    """A transit validity in the unit square: a state outside every box, a motion as `checkers` checks it."""
+
+    def __init__(self, boxes):
+        self.state, self.motion = checkers(boxes)
+
+    def state_valid(self, q: np.ndarray) -> bool:
+        return self.state(np.asarray(q, float))
+
+    def motion_valid(self, a: np.ndarray, b: np.ndarray, ends: bool = True) -> bool:
+        return self.motion(np.asarray(a, float), np.asarray(b, float))
+
+
+def _behind_a_wall(closed: bool):
+    """A query whose start (0.2, 0.5) sees no roadmap node: a wall at x 0.30-0.35 over y 0.15-0.85 hides the nodes (a
+    grid at x >= 0.6, y 0.3-0.7), and a closed box around the start hides everything."""
+    import types
+
+    from planner.motion.graph import MotionGraph
+    from planner.motion.space import JointSpace
+
+    xs, ys = np.meshgrid([0.6, 0.75, 0.9], [0.3, 0.5, 0.7])
+    nodes = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    edges = np.array([(i, j) for i in range(len(nodes)) for j in range(i + 1, len(nodes))
+                      if np.linalg.norm(nodes[i] - nodes[j]) < 0.21])
+    roadmap = types.SimpleNamespace(node_q=nodes, edges=edges, edge_valid=np.ones(len(edges), dtype=bool))
+    space = JointSpace.of(np.zeros(2), np.ones(2), np.arange(2), np.zeros(2))
+    return MotionGraph(roadmap), space, _Walls(walls_of(closed)), np.array([0.2, 0.5]), np.array([0.9, 0.5])
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_an_end_no_graph_edge_joins_is_reconnected_once_with_the_baselines_budget(closed):
+    """A start behind a wall that hides every node: the graph cannot help, so the query is RRTConnect's alone, with the
+    baseline's budget (`rrt_motions`), once: found around the wall though a reconnection's budget (one motion here)
+    could not find it; where the start is boxed in, the query fails after that one search."""
+    from planner.motion.transit import LazyTransit, TransitFailed, TransitParams, TransitStats
+
+    graph, space, walls, start, goal = _behind_a_wall(closed)
+    params = TransitParams(connections=4, max_connections=8, max_searches=60, max_reconnections=2, reconnect_motions=1,
+                           rrt_motions=3000, rrt_step=0.1, shortcut_attempts=0, shortcut_min_gain=0.0,
+                           graph_shortcut_length=np.inf, goal_nodes=16)
+    stats = TransitStats()
+    transit = LazyTransit(graph, space, walls, walls, walls, params, np.random.default_rng(0), stats)
+    if closed:
+        with pytest.raises(TransitFailed, match="1 RRT reconnections"):
+            transit.query(start, goal)
+        assert stats.rrt_calls == 1
+        return
+    path = transit.query(start, goal)
+    assert stats.rrt_calls == 1
+    assert np.array_equal(path[0], start) and np.array_equal(path[-1], goal)
+    for a, b in zip(path[:-1], path[1:]):  # free at ten times the checker's resolution
+        assert np.all(clearance(segment_points(a, b, STEP / 10), walls_of(closed)) > 0.0)
+
+
+def walls_of(closed: bool):
+    """The boxes of `_behind_a_wall`, for the independent re-check."""
+    boxes = [(np.array([0.30, 0.15]), np.array([0.35, 0.85]))]
+    return boxes if not closed else boxes + [(np.array([0.05, 0.10]), np.array([0.35, 0.15])),
+                                             (np.array([0.05, 0.85]), np.array([0.35, 0.90])),
+                                             (np.array([0.05, 0.10]), np.array([0.10, 0.90]))]

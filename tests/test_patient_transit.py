@@ -1,9 +1,9 @@
 """A transit the graph and its quick reconnections cannot find is searched again by a patient planner
 (DoubleGraspPlanner.patiently), as the strategies plan the sequences that failed at a transit when none moved.
 
-On the example session, the Rest transit is planned with a graph joined to its ends by one edge at most and
-reconnections of one motion check each: the quick planner fails, the patient one finds it with RRTConnect given a
-whole query's budget. The path found is checked independently: the robot's URDF geometry through python-fcl, against
+On the example session, the Rest transit is planned with a graph joined to its ends by one edge at most and no
+reconnection left in the phase: the quick planner fails, the patient one finds it with RRTConnect given a whole
+query's budget. The path found is checked independently: the robot's URDF geometry through python-fcl, against
 the scene and the object at its final placement, every 0.01 rad.
 """
 from __future__ import annotations
@@ -27,7 +27,7 @@ from planner.motion.transit_stage import transit_joints
 from planner.motion.validities import Validities
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
-HURRIED = MotionParams(reconnect_motions=1, connections=1, max_connections=1, goal_nodes=1, max_searches=1)
+HURRIED = MotionParams(reconnect_motions=1, connections=1, max_connections=1, goal_nodes=1, max_searches=1, phase_reconnections=0)
 
 
 def test_a_transit_the_quick_search_misses_is_found_patiently():
@@ -54,7 +54,7 @@ def test_a_transit_the_quick_search_misses_is_found_patiently():
     patient = planner(True)
     found = patient.transits([job])[0]
     assert not isinstance(found, PieceFailed), f"not found patiently either: {found}"
-    assert patient.stats[Phase.REST].rrt_calls > HURRIED.max_reconnections, "no patient reconnection was made"
+    assert patient.stats[Phase.REST].rrt_calls > 0, "no patient reconnection was made"
     path = found[0].path
     assert np.allclose(path[0], qa) and np.allclose(path[-1], qb)
     oracle = Oracle(scene)

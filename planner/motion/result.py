@@ -36,7 +36,8 @@ class MotionParams:
     max_searches: int = bounded(60, 1, 10000, "searches", "transit: graph searches after invalidations before reconnecting")
     max_reconnections: int = bounded(2, 0, 100, "calls", "transit: RRTConnect calls per query (then the next candidate end)")
     phase_reconnections: int = bounded(4, 0, 1000, "calls", "transit: RRTConnect calls per phase (then its queries search the graph only)")
-    reconnect_motions: int = bounded(1000, 1, 1000000, "motion checks", "a budget of one RRTConnect reconnection (counts: any machine)")
+    reconnect_motions: int = bounded(1000, 1, 1000000, "motion checks", "a budget of one RRTConnect reconnection (counts: any "
+                                     "machine; rrt_motions from an end no graph edge joins)")
     patient_sequences: int = bounded(4, 0, 1000, "sequences", "when none moved: the first that failed at a transit, again with "
                                      "rrt_motions per reconnection")
     rrt_motions: int = bounded(20000, 1, 1000000, "motion checks", "a budget of one RRTConnect query of the baseline planner 'rrt'")

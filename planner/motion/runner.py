@@ -1,6 +1,6 @@
-"""The one runner of the transits: once every contact motion is made, the phases' transits are independent, and
-RRTConnect's run at once in forked workers (one per core); on the graph they run in this process, where forking
-would cost about what they do.
+"""The one runner of the transits: once every contact motion is made, the phases' transits are independent and run at
+once in forked workers (one per core), on the graph as with RRTConnect alone (on two idle cores forking the graph's
+transits saved about a tenth of the default task's step and a sixth of the shelf's: docs/benchmarks.md).
 
 Each job gets its own transit stage: a random stream seeded from the plan's (drawn in the order of the jobs), its
 own copy of the graph and its own figures, so the result does not depend on how many jobs run at once. Their
@@ -28,11 +28,9 @@ StageMaker = Callable[[Phase, MotionGraph, np.random.Generator, TransitStats], T
 
 def run_transits(jobs: list[Job], make_stage: StageMaker, graph: MotionGraph, rng: np.random.Generator,
                  stats: list[TransitStats], weights: JointSpace | None) -> list[list[Piece] | PieceFailed]:
-    """The pieces of each (phase, job), or how it failed, in the order given; run in that order in forked workers when
-    they search no graph, else in this process. `stats`: the phases' figures, which the jobs' join; `weights`: the space
-    whose edge lengths every graph search weighs by, computed once here (None: the jobs search no graph: RRTConnect's
-    queries, each worth a worker; on the graph, a transit costs about what forking a worker and copying the pages it
-    writes does: see docs/benchmarks.md)."""
+    """The pieces of each (phase, job), or how it failed, in the order given; run in that order in forked workers.
+    `stats`: the phases' figures, which the jobs' join; `weights`: the space whose edge lengths every graph search
+    weighs by, computed once here, before the workers inherit the graph (None: the jobs search no graph)."""
     seeds = rng.integers(2**63, size=len(jobs))
     if weights is not None:
         graph.weights(weights)
@@ -48,7 +46,7 @@ def run_transits(jobs: list[Job], make_stage: StageMaker, graph: MotionGraph, rn
             out = (exc.phase, exc.part, exc.why)
         return out, stage.stats, [s.seconds_contact - b for s, b in zip(stats, before)]
 
-    results = forked_map(run, range(len(jobs)), workers=1 if weights is not None else None)
+    results = forked_map(run, range(len(jobs)))
     for k, s in enumerate(stats):  # inline, the jobs' contact seconds are there already: counted once either way
         s.seconds_contact = contact_before[k] + sum(spent[k] for _, _, spent in results)
     for (phase, _), (_, job_stats, _) in zip(jobs, results):

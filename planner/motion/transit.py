@@ -94,6 +94,7 @@ class LazyTransit:
         self.graph, self.space, self.lazy, self.full, self.near, self.p, self.rng, self.stats = \
             graph, space, lazy, full, near, params, rng, stats
         self.ends: tuple[int, ...] = ()
+        self.alone: set[int] = set()  # the ends no graph node joins
         self.status = PhaseStatus(graph)
 
     def _config(self, node: int) -> np.ndarray:
@@ -192,7 +193,9 @@ class LazyTransit:
         self.status.grow()
         self.status.node[[start, goal]] = VALID
         if self._connect(start):  # else the graph cannot help: the start is reconnected to the goal directly
-            self._connect(goal)
+            self.alone = set() if self._connect(goal) else {goal}
+        else:
+            self.alone = {start, goal}
         stats.nodes_planning += 2
         stats.seconds_planning += time.perf_counter() - t0
         last: tuple[list[int], tuple[int, int]] | None = None
@@ -220,11 +223,15 @@ class LazyTransit:
             stats.rrt_calls += 1
             reconnections += 1
             check = self.near if {a, *targets} & set(self.ends) else self.full
+            single = a in self.alone  # the graph joins not this end: the query is the baseline's, and so is its budget
             t_rrt = time.perf_counter()
             found = _rrt(self.space, check, self._config(a), np.array([self._config(n) for n in targets]),
-                         int(self.rng.integers(2**31)), self.p.reconnect_motions, self.p.rrt_step)
+                         int(self.rng.integers(2**31)), self.p.rrt_motions if single else self.p.reconnect_motions,
+                         self.p.rrt_step)
             stats.seconds_reconnecting += time.perf_counter() - t_rrt
             t += time.perf_counter() - t_rrt  # the RRT's time is not validation's
+            if found is None and single:
+                break
             if found is not None:
                 ids = self.graph.add_nodes(found[1:-1])
                 reached = self.space.distance(np.array([self._config(n) for n in targets]), found[-1])
