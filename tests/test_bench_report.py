@@ -95,3 +95,17 @@ def test_where_the_time_goes_reads_the_timing_after_the_phases_not_the_search_st
     assert abs(where["timing and sampling"] - 0.3) < 1e-9  # the median of 0.2, 0.3, 0.4: never the search's 6.5
     assert abs(where["contact motions"] - 0.3) < 1e-9 and abs(where["graph search"] - 0.25) < 1e-9
     assert abs(where["other"]) < 1e-9  # each run's seconds are its phases' and its timing's
+
+
+def test_the_transits_of_the_sequences_given_up_count_in_the_runs_figures():
+    # ours gave up sequences on seeds 1 and 2 (500 and 40 pair tests, 0.5 and 2.0 s, 7 and 9 checks); its per-seed
+    # pair tests 40 + 500, 120, 80 + 40 -> 540, 120, 120: median 120; transit seconds 1.5, 0.5, 4.0 -> ratios 4/3, 10, 1.5
+    runs = {"roadmap": [{**_timed(0, 1.0, 0.5, 10), "given_up": {"checks": 7, "pair_tests": 500, "seconds": 0.5}},
+                        _timed(1, 0.5, 0.5, 30),
+                        {**_timed(2, 2.0, 0.5, 20), "given_up": {"checks": 9, "pair_tests": 40, "seconds": 2.0}}],
+            "rrt": [_timed(0, 2.0, 0.5, 50), _timed(1, 5.0, 0.5, 60), _timed(2, 6.0, 0.5, 100)]}
+    d = MotionBench([0, 1, 2], runs).to_dict()
+    assert [row["ours_pair_tests"] for row in d["per_seed"]] == [540, 120, 120] and d["ours_pair_tests_median"] == 120
+    assert [round(row["ours_transit_seconds"], 9) for row in d["per_seed"]] == [1.5, 0.5, 4.0]
+    assert abs(d["transit_speedup"] - 1.5) < 1e-9
+    assert d["ours_transit_checks_median"] == 7  # of 7, 0, 9: the phases' own checks are 0 in these records

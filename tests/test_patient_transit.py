@@ -9,6 +9,7 @@ the scene and the object at its final placement, every 0.01 rad.
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 from oracle import Oracle
@@ -63,3 +64,39 @@ def test_a_transit_the_quick_search_misses_is_found_patiently():
             q = a + s * (b - a)
             hits = oracle.robot_collisions(q) + oracle.object_hits(q, scene.object_final)
             assert not hits, f"the patient transit collides: {hits}"
+
+
+def test_the_transits_of_a_sequence_given_up_are_counted():
+    """The first double grasp is planned by a hurried planner, whose Rest transit fails: the sequence is given up and
+    the next moves. The work of the one given up is not lost from the figures: the stage 'transits of the sequences
+    given up' holds its planner's transit checks and pair tests, and the bench adds them to the run's."""
+    from planner.cli.bench import _given_up
+    from planner.handover.grasp_configs import GraspConfigParams
+    from planner.motion.strategies import GIVEN_UP, plan_sequences
+
+    session = Session.open(EXAMPLE)
+    scene, roadmap = session.scene, session.result("roadmap")
+    p = MotionParams(strategy="handover")
+    made: list[DoubleGraspPlanner] = []
+
+    def make(patient: bool) -> DoubleGraspPlanner:
+        params = HURRIED if not made else p
+        validities = Validities(scene, build_collision_model(scene.robot, scene.environment),
+                                transit_profile(roadmap.resolution, params.transit_env_padding, params.transit_self_padding),
+                                contact_profile(params))
+        made.append(DoubleGraspPlanner(scene, validities, MotionGraph(roadmap), params, np.random.default_rng(0), False, patient))
+        return made[-1]
+
+    attempt = plan_sequences(make, scene, session.result("pick_grasps"), session.result("place_grasps"),
+                             session.result("double_grasps"), (session.result("grasp_configs"), GraspConfigParams()),
+                             None, p, np.random.default_rng(0), lambda *a: None)
+    assert attempt.pieces is not None and attempt.tried[0] and "transit" in attempt.tried[0], attempt.tried
+    hurried = made[0]
+    checks, pairs = sum(s.checks for s in hurried.stats), sum(s.pair_tests for s in hurried.stats)
+    assert checks > 0 and pairs > 0
+    stage = next(s for s in attempt.stages if s["stage"] == GIVEN_UP)
+    assert (stage["checks"], stage["count"]) == (checks, pairs)
+    assert len(attempt.seconds) == len(attempt.stages)  # the stage's seconds are where the stage table reads them
+    motion = SimpleNamespace(stages=attempt.stages)
+    given = _given_up(motion, attempt.seconds)
+    assert (given["checks"], given["pair_tests"]) == (checks, pairs) and given["seconds"] > 0

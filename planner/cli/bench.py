@@ -183,7 +183,7 @@ class MotionBench:
                 "transit_seconds": _median([_transit_seconds(r) for r in runs if r["phases"]]),
                 "pair_tests": _median([_pair_tests(r) for r in runs if r["phases"]]),
                 "duration": _median([sum(p["duration"] for p in r["phases"]) for r in runs if r["success"]]),
-                "transit_checks": _median([sum(p["transit_checks"] for p in r["phases"]) for r in runs if r["phases"]]),
+                "transit_checks": _median([_transit_checks(r) for r in runs if r["phases"]]),
                 "phases": phases, "where": self.where(planner)}
 
     def transit_speedup(self) -> float | None:
@@ -286,18 +286,35 @@ class MotionBench:
 TRANSIT_KINDS = 4  # of each phase's PHASE_SECONDS, the first are its transits' (searching, validating, RRT, shortcutting)
 
 
+def _given_up(motion, seconds: list[float]) -> dict:
+    """The transits of the sequences a run gave up before the one that moved: checks, pair tests, seconds (0 if none)."""
+    from planner.motion.strategies import GIVEN_UP
+
+    k = next((i for i, s in enumerate(motion.stages) if s["stage"] == GIVEN_UP), None)
+    if k is None:
+        return {"checks": 0, "pair_tests": 0, "seconds": 0.0}
+    return {"checks": motion.stages[k]["checks"], "pair_tests": motion.stages[k]["count"], "seconds": seconds[k]}
+
+
 def _transit_seconds(run: dict) -> float:
-    """A run's seconds in its transits, summed over the phases (their workers' seconds: the transits run in parallel)."""
+    """A run's seconds in its transits, summed over the phases and the sequences given up (their workers' seconds: the
+    transits run in parallel)."""
     from planner.motion import PHASE_SECONDS
 
     per, sec = len(PHASE_SECONDS), run["phase_seconds"]
-    return float(sum(sum(sec[per * i: per * i + TRANSIT_KINDS]) for i in range(len(run["phases"]))))
+    moved = sum(sum(sec[per * i: per * i + TRANSIT_KINDS]) for i in range(len(run["phases"])))
+    return float(moved + run.get("given_up", {}).get("seconds", 0.0))
 
 
 def _pair_tests(run: dict) -> int:
-    """A run's narrow-phase pair tests in its transits, summed over the phases (0 for records from before they were
-    counted)."""
-    return int(sum(p.get("transit_pair_tests", 0) for p in run["phases"]))
+    """A run's narrow-phase pair tests in its transits, summed over the phases and the sequences given up (0 for
+    records from before they were counted)."""
+    return int(sum(p.get("transit_pair_tests", 0) for p in run["phases"]) + run.get("given_up", {}).get("pair_tests", 0))
+
+
+def _transit_checks(run: dict) -> int:
+    """A run's collision checks in its transits, summed over the phases and the sequences given up."""
+    return int(sum(p["transit_checks"] for p in run["phases"]) + run.get("given_up", {}).get("checks", 0))
 
 
 def _ratio(a: float, b: float) -> float:
@@ -362,7 +379,7 @@ def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int =
             done = len(PHASES) if not motion.failure else next(i for i, n in enumerate(PHASES) if failed.startswith(n))
             runs[planner].append({"seed": seed, "roadmap": r, "seconds": elapsed, "success": not motion.failure,
                                   "double_grasp": motion.double_grasp, "phases": motion.phases, "phase_seconds": seconds,
-                                  "phases_done": done, "failure": motion.failure})
+                                  "phases_done": done, "failure": motion.failure, "given_up": _given_up(motion, seconds)})
             on = f" (roadmap {r})" if roadmaps > 1 and r is not None else ""
             progress(f"seed {seed} {planner}{on}: {elapsed:.2f} s, {'ok' if not motion.failure else motion.failure[:120]}")
     return MotionBench(list(range(seeds)), runs, (before, bench_collision(scene, CHECK_SAMPLES).full_check_us_median), repeat, roadmaps)

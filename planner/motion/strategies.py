@@ -51,6 +51,10 @@ class Attempt:
     alternatives: list[dict] = field(default_factory=list)
     stages: list[dict] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)
+    given_up: Counter = field(default_factory=Counter)  # the transits of the sequences given up: checks, pair_tests, seconds
+
+
+GIVEN_UP = "transits of the sequences given up"  # the stage that counts them (absent when the first sequence moved)
 
 
 def hand_grasp(grasps: GraspList, rank: int) -> HandGrasp:
@@ -150,6 +154,9 @@ def plan_sequences(make: Callable[[bool], DoubleGraspPlanner], scene: Scene, pic
         try:
             pieces = _plan(planner, seq, pick, place, dg, placements)
         except PieceFailed as exc:
+            for st in planner.stats:
+                out.given_up.update(checks=st.checks, pair_tests=st.pair_tests, seconds=st.seconds_planning + st.seconds_validating
+                                    + st.seconds_reconnecting + st.seconds_shortcut)
             tried[name].append(f"{_describe(seq, placements)}{again}: {exc}")
             out.tried.append(tried[name][-1])
             skips.failed(seq, exc)
@@ -190,6 +197,10 @@ def plan_sequences(make: Callable[[bool], DoubleGraspPlanner], scene: Scene, pic
                   {"stage": "sequences planned", "count": len(out.tried),
                    "note": ", ".join(f"{len(tried[s]) + (s == out.strategy)} {s}" for s in allowed if s not in removed) or "none"}]
     out.seconds = [time.perf_counter() - started - planning, planning]
+    if out.given_up:  # only then: a motion planned at once keeps the stages it had before they were counted
+        out.stages.append({"stage": GIVEN_UP, "count": out.given_up["pair_tests"], "checks": out.given_up["checks"],
+                           "note": f"narrow-phase pair tests, {out.given_up['checks']:,} checks (of the sequences planned)"})
+        out.seconds.append(out.given_up["seconds"])
     for name in allowed:
         if name == out.strategy:
             continue
