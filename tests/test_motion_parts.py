@@ -644,6 +644,38 @@ def test_clearances_measure_exactly_the_pairs_nearer_than_far():
     assert measured > 100, "the configurations must bring many pairs near"
 
 
+def test_the_clearance_meter_measures_a_configuration_the_same_whatever_it_measured_before(example):
+    """Along the example's motion (hands near the vase, the object carried), a configuration measured again after five
+    others gives the very same distances: what a fitted padding, and so the checks it spaces, is made of depends only on
+    the configuration (pinocchio's per-pair distance functors kept their GJK state and moved by up to 5e-7 m)."""
+    from planner.collision.checker import build_collision_model
+    from planner.collision.situation import Situation
+    from planner.collision.validity import transit_profile
+    from planner.core.session import Session
+    from planner.motion.result import MotionParams
+    from planner.motion.step import contact_profile
+    from planner.motion.transit_stage import transit_joints
+    from planner.motion.validities import Validities
+
+    scene, roadmap, _ = example
+    m = Session.open(EXAMPLE).result("motion")
+    robot, p = scene.robot, MotionParams()
+    validities = Validities(scene, build_collision_model(robot, scene.environment),
+                            transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding), contact_profile(p))
+    rng = np.random.default_rng(0)
+    measured = 0
+    for k in rng.choice(len(m.q), 40, replace=False):
+        q, arm = m.q[k], robot.spec.arm_names[m.holder[k]] if m.holder[k] >= 0 else None
+        hold = m.object_pose[k] if arm is None else np.linalg.inv(robot.frame_placement(q, robot.palm_frame(arm))) @ m.object_pose[k]
+        checks = validities.of(Situation(arm, hold), q, transit_joints(robot))
+        first = checks.meter(q)
+        for j in rng.choice(len(m.q), 5):
+            checks.meter(m.q[j])
+        assert checks.meter(q) == first, k
+        measured += len(first)
+    assert measured > 50, "the samples must bring many pairs near"
+
+
 @pytest.mark.parametrize("baseline", [False, True], ids=["roadmap", "rrt"])
 def test_transit_checks_and_pair_tests_count_every_check_of_the_transit(example, monkeypatch, baseline):
     """Table I's transit checks are every collision check a transit makes, counted apart from the planner's own tally:

@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 
+import coal
 import numpy as np
 import pinocchio as pin
 
@@ -376,8 +377,16 @@ class CollisionChecker:
         return [int(k) for k in self._collect.pair_indexes]
 
     def distance(self, pair: int) -> float:
-        """The distance of a pair where the last check placed the geometries."""
-        return float(pin.computeDistance(self.cm.geometry, self._gd, pair).min_distance)
+        """The distance of a pair where the last check placed the geometries, by coal's own function with a fresh solver:
+        pinocchio's per-pair distance functor keeps its GJK state between calls, so the same placement measured again
+        after others gave up to 5e-7 m more or less (a fitted padding, and the checks it spaces, then depended on what
+        was measured before: on whether a transit ran in this process or in a worker)."""
+        gm, placed = self.cm.geometry, self._gd.oMg
+        p = gm.collisionPairs[pair]
+        a, b = placed[p.first], placed[p.second]
+        return float(coal.distance(gm.geometryObjects[p.first].geometry, coal.Transform3s(a.rotation, a.translation),
+                                   gm.geometryObjects[p.second].geometry, coal.Transform3s(b.rotation, b.translation),
+                                   coal.DistanceRequest(), coal.DistanceResult()))
 
     def colliding_pairs(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[tuple[str, str]]:
         """Every colliding pair of the subset at q, by geometry name (slower: for display and reports)."""
