@@ -379,8 +379,8 @@ class CollisionChecker:
     def distance(self, pair: int) -> float:
         """The distance of a pair where the last check placed the geometries, by coal's own function with a fresh solver:
         pinocchio's per-pair distance functor keeps its GJK state between calls, so the same placement measured again
-        after others gave up to 5e-7 m more or less (a fitted padding, and the checks it spaces, then depended on what
-        was measured before: on whether a transit ran in this process or in a worker)."""
+        after others came out different within the solver's tolerance (a fitted padding, and the checks it spaces, then
+        depended on what was measured before: on whether a transit ran in this process or in a worker)."""
         gm, placed = self.cm.geometry, self._gd.oMg
         p = gm.collisionPairs[pair]
         a, b = placed[p.first], placed[p.second]

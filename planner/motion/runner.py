@@ -1,6 +1,6 @@
 """The one runner of the transits: once every contact motion is made, the phases' transits are independent and run at
-once in forked workers (one per core), on the graph as with RRTConnect alone (on two idle cores forking the graph's
-transits saved about a tenth of the default task's step and a sixth of the shelf's: docs/benchmarks.md).
+once in forked workers (one per core), on the graph as with RRTConnect alone: a worker pays for the pages it writes,
+but on two cores less than the second core gives (docs/benchmarks.md).
 
 Each job gets its own transit stage: a random stream seeded from the plan's (drawn in the order of the jobs), its
 own copy of the graph and its own figures, so the result does not depend on how many jobs run at once. Their
