@@ -66,13 +66,11 @@ def test_a_transit_the_quick_search_misses_is_found_patiently():
             assert not hits, f"the patient transit collides: {hits}"
 
 
-def test_the_transits_of_a_sequence_given_up_are_counted():
-    """The first double grasp is planned by a hurried planner, whose Rest transit fails: the sequence is given up and
-    the next moves. The work of the one given up is not lost from the figures: the stage 'transits of the sequences
-    given up' holds its planner's transit checks and pair tests, and the bench adds them to the run's."""
-    from planner.cli.bench import _given_up
+def _given_up_first(first: MotionParams):
+    """The example's sequences planned with `first`'s planner for the first one and the defaults after: (the attempt,
+    the first planner)."""
     from planner.handover.grasp_configs import GraspConfigParams
-    from planner.motion.strategies import GIVEN_UP, plan_sequences
+    from planner.motion.strategies import plan_sequences
 
     session = Session.open(EXAMPLE)
     scene, roadmap = session.scene, session.result("roadmap")
@@ -80,7 +78,7 @@ def test_the_transits_of_a_sequence_given_up_are_counted():
     made: list[DoubleGraspPlanner] = []
 
     def make(patient: bool) -> DoubleGraspPlanner:
-        params = HURRIED if not made else p
+        params = first if not made else p
         validities = Validities(scene, build_collision_model(scene.robot, scene.environment),
                                 transit_profile(roadmap.resolution, params.transit_env_padding, params.transit_self_padding),
                                 contact_profile(params))
@@ -90,13 +88,36 @@ def test_the_transits_of_a_sequence_given_up_are_counted():
     attempt = plan_sequences(make, scene, session.result("pick_grasps"), session.result("place_grasps"),
                              session.result("double_grasps"), (session.result("grasp_configs"), GraspConfigParams()),
                              None, p, np.random.default_rng(0), lambda *a: None)
-    assert attempt.pieces is not None and attempt.tried[0] and "transit" in attempt.tried[0], attempt.tried
-    hurried = made[0]
+    assert attempt.pieces is not None and attempt.tried[0], attempt.tried
+    return attempt, made[0]
+
+
+def test_the_transits_of_a_sequence_given_up_are_counted():
+    """The first double grasp is planned by a hurried planner, whose Rest transit fails: the sequence is given up and
+    the next moves. The work of the one given up is not lost from the figures: the stage 'transits of the sequences
+    given up' holds its planner's transit checks and pair tests, and the bench adds them to the run's."""
+    from planner.cli.bench import _given_up
+    from planner.motion.strategies import GIVEN_UP
+
+    attempt, hurried = _given_up_first(HURRIED)
+    assert "transit" in attempt.tried[0], attempt.tried
     checks, pairs = sum(s.checks for s in hurried.stats), sum(s.pair_tests for s in hurried.stats)
     assert checks > 0 and pairs > 0
     stage = next(s for s in attempt.stages if s["stage"] == GIVEN_UP)
     assert (stage["checks"], stage["count"]) == (checks, pairs)
     assert len(attempt.seconds) == len(attempt.stages)  # the stage's seconds are where the stage table reads them
-    motion = SimpleNamespace(stages=attempt.stages)
-    given = _given_up(motion, attempt.seconds)
+    given = _given_up(SimpleNamespace(stages=attempt.stages), attempt.seconds)
     assert (given["checks"], given["pair_tests"]) == (checks, pairs) and given["seconds"] > 0
+
+
+def test_a_sequence_given_up_before_its_transits_adds_no_stage():
+    """The first double grasp's contact motions fail (obstacles kept 5 cm away: the hand cannot reach the object), so no
+    transit of it ran: no stage counts its transits, and no stage of the motion counts 0 (a suite names the first stage
+    that kept nothing as where a failed step stopped)."""
+    from planner.cli.bench import _given_up
+    from planner.motion.strategies import GIVEN_UP
+
+    attempt, padded = _given_up_first(MotionParams(contact_env_padding=0.05, contact_env_clearance=0.04))
+    assert "transit" not in attempt.tried[0] and sum(s.checks for s in padded.stats) == 0, attempt.tried
+    assert all(s["stage"] != GIVEN_UP and s["count"] > 0 for s in attempt.stages if s["stage"] != "regrasp graph")
+    assert _given_up(SimpleNamespace(stages=attempt.stages), attempt.seconds) == {"checks": 0, "pair_tests": 0, "seconds": 0.0}

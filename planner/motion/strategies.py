@@ -197,7 +197,8 @@ def plan_sequences(make: Callable[[bool], DoubleGraspPlanner], scene: Scene, pic
                   {"stage": "sequences planned", "count": len(out.tried),
                    "note": ", ".join(f"{len(tried[s]) + (s == out.strategy)} {s}" for s in allowed if s not in removed) or "none"}]
     out.seconds = [time.perf_counter() - started - planning, planning]
-    if out.given_up:  # only then: a motion planned at once keeps the stages it had before they were counted
+    if out.given_up["pair_tests"]:  # only where they did narrow-phase work: a motion planned at once, or whose sequences
+        # given up failed in contact motions, keeps the stages it had (no stage counting 0, which a suite reads as emptied)
         out.stages.append({"stage": GIVEN_UP, "count": out.given_up["pair_tests"], "checks": out.given_up["checks"],
                            "note": f"narrow-phase pair tests, {out.given_up['checks']:,} checks (of the sequences planned)"})
         out.seconds.append(out.given_up["seconds"])
