@@ -155,8 +155,7 @@ def plan_sequences(make: Callable[[bool], DoubleGraspPlanner], scene: Scene, pic
             pieces = _plan(planner, seq, pick, place, dg, placements)
         except PieceFailed as exc:
             for st in planner.stats:
-                out.given_up.update(checks=st.checks, pair_tests=st.pair_tests, seconds=st.seconds_planning + st.seconds_validating
-                                    + st.seconds_reconnecting + st.seconds_shortcut)
+                out.given_up.update(checks=st.checks, pair_tests=st.pair_tests, seconds=st.transit_seconds)
             tried[name].append(f"{_describe(seq, placements)}{again}: {exc}")
             out.tried.append(tried[name][-1])
             skips.failed(seq, exc)

@@ -68,6 +68,11 @@ class TransitStats:
     checks: int = 0  # collision checks of the transits (their ends, connecting, validating, reconnecting, shortcutting)
     pair_tests: int = 0  # of those checks' pairs, how many reached the exact test (a count of narrow-phase work)
 
+    @property
+    def transit_seconds(self) -> float:
+        """The seconds in the transits themselves: searching, validating, reconnecting, shortcutting (not contact)."""
+        return self.seconds_planning + self.seconds_validating + self.seconds_reconnecting + self.seconds_shortcut
+
 
 class TransitFailed(Exception):
     """No transit path: `part` names what failed (for the step's failure message)."""
