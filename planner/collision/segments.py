@@ -28,6 +28,13 @@ Curves (a timed trajectory whose pieces bound each joint's speed, see `Curve`): 
 where joint j moves no faster than w_j, a point of g moves at most h sum_j w_j r_j(g); the same bound, summed over
 pieces, is a clock u(t) along which the curve moves no faster than a straight segment of the same length in u.
 The curve is checked at evenly spaced values of u (coarse first alike): the guarantee of a straight segment.
+
+A screen of a curve (`screen=True`) makes only its first checks: its SCREEN_LEVELS coarsest levels (or the coarse
+configurations, or as many of the van der Corput order), where nearly every curve that fails is found to fail. It
+guarantees nothing: a curve that passes it is checked for the rest later (`spans`), only where it is kept
+(smoothing.py): the configurations of its own checks that bound the spans kept (for a pair checked at every 2^j-th,
+from the last such configuration before a span to the first after it), less those of the screen. So a curve checked
+in parts never costs more checks than checked whole, and every span kept has the guarantee of the whole check.
 """
 from __future__ import annotations
 
@@ -81,6 +88,7 @@ def geometry_radii(cm: CollisionModel, known: np.ndarray | None = None) -> np.nd
 
 
 MAX_LEVEL = 4  # a pair is checked at every 16th configuration at the sparsest: the finest levels hold the savings
+SCREEN_LEVELS = 2  # a curve's screen: its coarsest levels (every 16th configuration, then the 8th between them)
 FEW_PAIRS = 16  # a level due for this many pairs or fewer tests each on its own, without the broad phase
 LEVEL_SUBSETS = 32  # per segment checker, the pair subsets of levels kept with their collision tables (most recent)
 
@@ -89,10 +97,16 @@ LEVEL_SUBSETS = 32  # per segment checker, the pair subsets of levels kept with 
 def level_order(n: int, top: int) -> tuple[tuple[int, np.ndarray], ...]:
     """The indices 0..n-1 by level, coarsest first: level `top` holds 0, n-1 and the multiples of 2^top, level j < top
     the odd multiples of 2^j; within a level in van der Corput order (read-only, computed once per n and top)."""
-    order = (van_der_corput(n) * (n - 1)).round().astype(int)
+    order = bisection_indices(n)
     odd = order & -order  # the largest power of two dividing each index (0 for index 0)
     level = np.where((order == 0) | (order == n - 1), top, np.minimum(np.log2(np.maximum(odd, 1)).astype(int), top))
     return tuple((j, frozen(order[level == j])) for j in range(top, -1, -1) if np.any(level == j))
+
+
+@functools.lru_cache(maxsize=4096)
+def bisection_indices(n: int) -> np.ndarray:
+    """The indices 0..n-1 in van der Corput order (read-only, computed once per n)."""
+    return frozen((van_der_corput(n) * (n - 1)).round().astype(int))
 
 
 @functools.lru_cache(maxsize=4096)
@@ -101,17 +115,14 @@ def van_der_corput(n: int) -> np.ndarray:
     computed once per n, as every segment of n checks asks for the same order)."""
     if n <= 1:
         return frozen(np.zeros(max(n, 0)))
-    order = [0, n - 1]
-    intervals = [(0, n - 1)]
-    while intervals:
-        finer = []
-        for a, b in intervals:
-            if b - a > 1:
-                m = (a + b) // 2
-                order.append(m)
-                finer += [(a, m), (m, b)]
-        intervals = finer
-    return frozen(np.asarray(order, dtype=float) / (n - 1))
+    order = [np.array([0, n - 1])]
+    a, b = np.array([0]), np.array([n - 1])
+    while len(a):  # level by level: each interval's midpoint, then its halves in order
+        a, b = a[b - a > 1], b[b - a > 1]
+        m = (a + b) // 2
+        order.append(m)
+        a, b = np.stack([a, m], axis=1).ravel(), np.stack([m, b], axis=1).ravel()
+    return frozen(np.concatenate(order).astype(float) / (n - 1))
 
 
 def allowances(cm: CollisionModel, env_clearance: float, self_clearance: float, object_clearance: float = 0.0) -> np.ndarray:
@@ -160,7 +171,7 @@ class SegmentChecker:
         self._leading_rows: dict[tuple[str, bytes], np.ndarray] = {}
         self.coarse = int(coarse)
         self._coarse_margins = pair_table(cm, paddings + (self.coarse - 1) * allow) if coarse > 1 else None
-        self._last_clock: tuple | None = None  # (curve, subset, its clock): see _clock
+        self._clocks: tuple = (None, {})  # (the last curve asked about, its clock per subset): see _clock
 
     def in_collision(self, q: np.ndarray, subset: str, coarse: bool = False) -> bool:
         """One check of q over a subset, at the paddings (or the coarse ones)."""
@@ -240,28 +251,35 @@ class SegmentChecker:
 
     def _clock(self, curve: Curve, subset: str) -> tuple[np.ndarray, ...]:
         """(breakpoints, speed bounds, moving joints, the clock's rate per part, the clock at the breakpoints) of a curve
-        (see the module), kept for the last curve asked about: its count, then its check."""
-        if self._last_clock is None or self._last_clock[0] is not curve or self._last_clock[1] != subset:
+        (see the module), kept for the last curve asked about (per subset): its counts, then its checks."""
+        if self._clocks[0] is not curve:
+            self._clocks = (curve, {})
+        if subset not in self._clocks[1]:
             t, bound = curve.speed_bounds()
             moving = np.flatnonzero(bound.max(axis=0) > 0)
             rates = np.einsum("kj,rj->kr", bound[:, moving], self._leading(subset, moving)).max(axis=1)  # no BLAS threads in a worker
             clock = np.concatenate([[0.0], np.cumsum(rates * np.diff(t))])
-            self._last_clock = (curve, subset, (t, bound, moving, rates, clock))
-        return self._last_clock[2]
+            self._clocks[1][subset] = (t, bound, moving, rates, clock)
+        return self._clocks[1][subset]
 
-    def curve_first_hit(self, curve: Curve, subset: str, ends: bool = True) -> np.ndarray | None:
+    def curve_first_hit(self, curve: Curve, subset: str, ends: bool = True, screen: bool = False,
+                        spans: np.ndarray | None = None) -> np.ndarray | None:
         """The first configuration of a curve, in checking order, whose check fails; None when all pass (see the
-        module: as many checks as a straight segment moving as far; `ends=False`: both ends are known free)."""
+        module: as many checks as a straight segment moving as far; `ends=False`: both ends are known free; `screen`:
+        its first checks only; `spans`: (m, 2) times of the curve, after its screen passed: the rest of its checks
+        that bound them)."""
         t, bound, moving, rates, clock = self._clock(curve, subset)
+        windows = None if spans is None else np.interp(np.asarray(spans, float), t, clock) / max(clock[-1], 1e-300)
         n = int(np.ceil(clock[-1])) + 1
         grid = self._grid(n)  # every parameter a check may read, evaluated at once
         q = curve.positions(np.interp(np.linspace(0.0, clock[-1], grid), clock, t))
         levels = None
-        if grid == n and n >= 3:  # a row moves at most its largest share of the clock's rate, in any piece, along it
-            row_rates = np.einsum("kj,rj->kr", bound[:, moving], self.weights(subset)[:, moving])
-            share = (row_rates / np.maximum(rates, 1e-300)[:, None]).max(axis=0, where=rates[:, None] > 0, initial=0.0)
+        if grid == n and n >= 3:  # a row moves at most this share of the clock along it: each joint at its largest
+            live = rates > 0  # speed per unit of the clock over all pieces (a bound: per piece cost a product per piece)
+            peak = (bound[live][:, moving] / rates[live, None]).max(axis=0, initial=0.0)
+            share = np.einsum("j,rj->r", peak, self.weights(subset)[:, moving])
             levels = self.pair_levels(subset, share * clock[-1], n)
-        return self._first_hit(n, lambda s: q[int(round(s * (grid - 1)))], subset, ends, levels)
+        return self._first_hit(n, lambda s: q[int(round(s * (grid - 1)))], subset, ends, levels, screen, windows)
 
     def _leading(self, subset: str, moving: np.ndarray) -> np.ndarray:
         """The subset's displacement weights over the moving joints without the rows another row bounds everywhere
@@ -282,28 +300,35 @@ class SegmentChecker:
         return n
 
     def _first_hit(self, n: int, at: Callable[[float], np.ndarray], subset: str, ends: bool,
-                   levels: np.ndarray | None = None) -> np.ndarray | None:
+                   levels: np.ndarray | None = None, screen: bool = False,
+                   windows: np.ndarray | None = None) -> np.ndarray | None:
         """The first of n evenly spaced configurations at(s), s in 0..1, whose check fails (coarse first, or each pair
-        at its `levels`: see the module); None when all pass."""
+        at its `levels`: see the module); None when all pass (`screen`: its first checks only; `windows`: (m, 2)
+        parameters, after the screen passed: the rest of the checks that bound them)."""
         if self._grid(n) != n:
-            s = coarse_first(n, self.coarse, lambda s, coarse: self.in_collision(at(s), subset, coarse), ends)
+            s = coarse_first(n, self.coarse, lambda s, coarse: self.in_collision(at(s), subset, coarse), ends, screen,
+                             windows)
             return None if s is None else at(s)
         if levels is not None:
-            return self._by_levels(n, at, subset, ends, levels)
-        order = van_der_corput(n)
-        for s in (order if ends else order[2:]):
-            q = at(s)
+            return self._by_levels(n, at, subset, ends, levels, screen, windows)
+        order = bisection_indices(n)
+        first = order if ends else order[2:]
+        cut = (n - 1) // 2 ** (MAX_LEVEL + 1 - SCREEN_LEVELS) + 2  # as many as the levels' screen
+        for i in first[:cut] if screen else first if windows is None else bounding(first[cut:], windows, n):
+            q = at(i / max(n - 1, 1))
             if self.in_collision(q, subset):
                 return q
         return None
 
-    def _by_levels(self, n: int, at: Callable[[float], np.ndarray], subset: str, ends: bool,
-                   levels: np.ndarray) -> np.ndarray | None:
-        """_first_hit with pair p checked only at the multiples of 2^levels[p] (and the ends), coarsest level first."""
-        for j, indices in level_order(n, int(levels.max())):
+    def _by_levels(self, n: int, at: Callable[[float], np.ndarray], subset: str, ends: bool, levels: np.ndarray,
+                   screen: bool = False, windows: np.ndarray | None = None) -> np.ndarray | None:
+        """_first_hit with pair p checked only at the multiples of 2^levels[p] (and the ends), coarsest level first
+        (`screen`: the SCREEN_LEVELS coarsest only; `windows`: the finer ones, where they bound the windows)."""
+        order = level_order(n, int(levels.max()))
+        for j, indices in order[:SCREEN_LEVELS] if screen else order if windows is None else order[SCREEN_LEVELS:]:
             due = levels <= j
             pairs = self.cm.subsets[subset][due] if int(due.sum()) <= FEW_PAIRS else self._level_subset(subset, due)
-            for i in indices:
+            for i in indices if windows is None else bounding(indices, windows, n, 2**j):
                 if not ends and (i == 0 or i == n - 1):
                     continue
                 q = at(i / (n - 1))
@@ -327,6 +352,15 @@ class SegmentChecker:
         return self._levels[key]
 
 
+def bounding(indices: np.ndarray, windows: np.ndarray, n: int, step: int = 1) -> np.ndarray:
+    """The indices (of n configurations) from the last multiple of `step` at or before a window (parameters 0..1) to the
+    first at or after it (or the last configuration), in their order."""
+    at = windows * (n - 1) / step
+    lo = np.floor(at[:, 0] - 1e-9) * step
+    hi = np.minimum(np.ceil(at[:, 1] + 1e-9) * step, n - 1)
+    return indices[np.any((indices[:, None] >= lo) & (indices[:, None] <= hi), axis=1)]
+
+
 def _undominated(rows: np.ndarray) -> np.ndarray:
     """The rows no other row bounds in every column (of equal rows, one)."""
     rows = rows[np.argsort(-rows.sum(axis=1), kind="stable")]
@@ -338,17 +372,19 @@ def _undominated(rows: np.ndarray) -> np.ndarray:
     return rows[kept]
 
 
-def coarse_first(n: int, k: int, hits: Callable[[float, bool], bool], ends: bool = True) -> float | None:
+def coarse_first(n: int, k: int, hits: Callable[[float, bool], bool], ends: bool = True,
+                 screen: bool = False, windows: np.ndarray | None = None) -> float | None:
     """Where a segment checked at n evenly spaced configurations (parameters 0..1) fails, checked coarse first (see the
     module); None when it passes. `hits(s, coarse)`: whether the check at s fails, at the coarse paddings or at the
     paddings. Every k-th of (at least) n configurations is checked coarse (see two_level). `ends=False`: both ends are
-    known to pass at the paddings."""
+    known to pass at the paddings; `screen`, `windows`: see two_level."""
     m = -(-(n - 1) // k)  # coarse intervals; m * k >= n - 1 fine ones
-    return two_level(m + 1, m * k + 1, hits, ends)
+    return two_level(m + 1, m * k + 1, hits, ends, screen=screen, windows=windows)
 
 
 def two_level(n: int, m: int, hits: Callable[[float, bool], bool], ends: bool = True,
-              between: Callable[[float], bool] | None = None) -> float | None:
+              between: Callable[[float], bool] | None = None, screen: bool = False,
+              windows: np.ndarray | None = None) -> float | None:
     """Where a segment fails, checked at n evenly spaced configurations at coarse paddings and, only within the
     intervals next to one that fails there, at the m (> n) evenly spaced configurations of its fine paddings; None
     when it passes. `hits(s, coarse)`: whether the check at parameter s fails at the coarse or the fine paddings. The
@@ -356,14 +392,19 @@ def two_level(n: int, m: int, hits: Callable[[float, bool], bool], ends: bool = 
     early). Each interval between two checked configurations is then as short as the paddings both its ends passed at
     need. `ends=False`: both ends are known to pass at the fine paddings. `between(s)`: whether a configuration strictly
     inside such an interval fails (default: hits(s, False)): there only the pairs padded less finely than coarsely need a
-    test, as every other pair passed at its padding at the coarse configurations."""
+    test, as every other pair passed at its padding at the coarse configurations. `screen`: the coarse configurations
+    only (None where they pass: no guarantee); `windows` ((k, 2) parameters): only what bounds them, the coarse
+    configurations again (their answers decide which intervals the fine ones fill)."""
     between = between or (lambda s: hits(s, False))
-    clear = np.zeros(n, dtype=bool)
-    for j in (van_der_corput(n) * (n - 1)).round().astype(int):
+    clear = np.ones(n, dtype=bool)  # outside the windows: nothing to fill
+    order = bisection_indices(n)
+    for j in order if windows is None else bounding(order, windows, n):
         s = j / (n - 1)
         clear[j] = not hits(s, True)
         if not clear[j] and (ends or 0 < j < n - 1) and hits(s, False):
             return s
+    if screen:
+        return None
     for j in np.flatnonzero(~(clear[:-1] & clear[1:])):
         for i in range(j * (m - 1) // (n - 1) + 1, -(-(j + 1) * (m - 1) // (n - 1))):  # strictly inside
             if between(i / (m - 1)):

@@ -99,12 +99,18 @@ class Validity:
         """Every check of the straight segment passes (`ends=False`: both ends are known valid)."""
         return self.seg.segment_free(qa, qb, self.subset, ends)
 
-    def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None) -> bool:
-        """Every check of a timed curve passes (see segments.py; `ends=False`: both ends are known valid); False, without
-        a check, for a curve whose check could make more than `most` checks."""
-        if most is not None and self.seg.most_curve_checks(curve, self.subset) > most:
+    def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None, screen: bool = False,
+                    spans: np.ndarray | None = None) -> bool:
+        """Every check of a timed curve passes (see segments.py; `ends=False`: both ends are known valid; `screen`: its
+        first checks, a screen that guarantees nothing; `spans`: after its screen passed, the rest of its checks that
+        bound these time spans); False, without a check, for a curve whose whole check could make more than `most`."""
+        if most is not None and self.curve_checks(curve) > most:
             return False
-        return self.seg.curve_first_hit(curve, self.subset, ends) is None
+        return self.seg.curve_first_hit(curve, self.subset, ends, screen, spans) is None
+
+    def curve_checks(self, curve: Curve) -> int:
+        """The most checks a curve's whole check can make."""
+        return self.seg.most_curve_checks(curve, self.subset)
 
     def samples(self, qa: np.ndarray, qb: np.ndarray, subset: str | None = None) -> int:
         """How many evenly spaced configurations a segment is checked at (its resolution), for this or another subset."""
@@ -178,9 +184,13 @@ class Graded:
         return two_level(n, m, lambda s, coarse: not (self.coarse if coarse else self.fine).state_valid(qa + s * dq), ends,
                          between) is None
 
-    def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None) -> bool:
+    def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None, screen: bool = False,
+                    spans: np.ndarray | None = None) -> bool:
         """A timed curve checked at the fine paddings throughout (see Validity.curve_valid)."""
-        return self.fine.curve_valid(curve, ends, most)
+        return self.fine.curve_valid(curve, ends, most, screen, spans)
+
+    def curve_checks(self, curve: Curve) -> int:
+        return self.fine.curve_checks(curve)
 
 
 KINDS = ("env", "self", "object")

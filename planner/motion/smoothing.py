@@ -5,8 +5,10 @@ object or lets go of it, the object is lifted off or set down, the object's situ
 ends; fingers shaping before an approach, or opening at the end, may move while the arms do. A run starts
 timed rest to rest at every vertex (trajectory.py): exactly the checked polylines. Then, drawn from the plan's
 random stream, two times t1 < t2 of the run are joined by the time-optimal ramp between the states (positions and
-velocities) there (ramps.py); where it is faster, it is checked as a curve (segments.py: the same displacement
-bound between checks as a straight segment) and replaces that span. Inside one piece it is checked with that
+velocities) there (ramps.py); where it is faster and its curve passes a screen (its first checks: segments.py), it
+replaces that span, and the rest of its checks are made at the end, where it survives later shortcuts (tentative.py:
+the same displacement bound between checks as a straight segment; should one fail, the run is smoothed again with
+every shortcut checked whole before it is kept). Inside one piece it is checked with that
 piece's own validity (a transit's paddings fitted to its ends, a contact motion's tight paddings); across pieces (a
 lift into a transit, a transit into an approach) with the transit profile in the object's situation without its
 exceptions (no fingertip nor support may touch), fitted to the ramp's ends: a hand near the object keeps the straight
@@ -22,6 +24,7 @@ from planner.collision.situation import Situation
 from planner.collision.validity import Validity
 from planner.motion.piece import TRANSIT_PARTS, Piece
 from planner.motion.ramps import TINY, min_times, ramp
+from planner.motion.tentative import Survivors
 from planner.motion.trajectory import Trajectory, rest_to_rest
 from planner.motion.validities import Validities
 
@@ -104,57 +107,74 @@ class Smoother:
         return outer, checks.validity(self.validities.contact).on("moving_inner")
 
     def smooth(self, pieces: list[Piece], rng: np.random.Generator, attempts: int, budget: int) -> SmoothedRun:
-        """The run's pieces timed rest to rest at every vertex, then shortened by checked ramps in three passes: from
-        the first vertex to the farthest it reaches by a rest-to-rest ramp, and on from there (the path's big
-        detours, each ramp checked once); around each vertex left (from halfway along the segment before to halfway
-        along the one after, else a quarter, a tenth of the way: short ramps, few checks, no stop left where one is
-        valid); between random times, at most
-        `attempts` of them. Each pass stops once the run's collision checks reach `budget`, and no ramp is checked
-        whose curve needs more checks than the budget has left."""
+        """The run's pieces timed rest to rest at every vertex, then shortened by shortcuts in three passes (see
+        `passes`) kept on a screen, the rest of their checks made where they survive (tentative.py). Should a surviving
+        part fail, the run is smoothed again from the start with what is left of `budget`, each shortcut checked whole
+        before it is kept."""
         timed = [(p, rest_to_rest(p.path, self.vmax, self.amax)) for p in pieces]
         timed = [(p, t) for p, t in timed if t is not None]
         if not timed:
             return SmoothedRun([], None, np.zeros(0), 0, 0)
-        run = _Run(self, [p for p, _ in timed], Trajectory.joined([t for _, t in timed]),
-                   np.cumsum([t.duration for _, t in timed]), budget)
-        run.marks = np.array([0.0] + [float(t) for t, v in zip(run.traj.t[1:-1], run.traj.v[1:]) if not v.any()]
-                             + [run.traj.duration])  # the vertices, where the robot rests
-        i = 0
-        while i < len(run.marks) - 2 and run.checks < budget:
-            j = next((j for j in range(len(run.marks) - 1, i + 1, -1) if run.attempt(run.marks[i], run.marks[j])), None)
-            if j is not None:
-                run.marks = np.delete(run.marks, np.arange(i + 1, j))
-            i += 1
-        for k in range(1, len(run.marks) - 1):
-            for part in CORNERS:  # a corner cut nearer the vertex leaves the checked path less: more likely valid
-                if run.checks >= budget:
-                    break
-                m = run.marks
-                if run.attempt(m[k] - part * (m[k] - m[k - 1]), m[k] + part * (m[k + 1] - m[k])):
-                    break
         draws = rng.random((attempts, 2))  # each random shortcut's two times, as shares of the run's duration then
+        start = ([p for p, _ in timed], Trajectory.joined([t for _, t in timed]), np.cumsum([t.duration for _, t in timed]))
+        run = _Run(self, *start, budget, screened=True)
+        passes(run, draws)
+        valid, checks = run.survivors.check()
+        spent = run.made + checks
+        if not valid:
+            run = _Run(self, *start, budget - spent, screened=False)
+            passes(run, draws)
+            spent += run.made
+        return SmoothedRun(run.pieces, run.traj, run.ends, spent, run.shortcuts)
+
+
+def passes(run: "_Run", draws: np.ndarray) -> None:
+    """A run shortened in three passes: from the first vertex to the farthest it reaches by a rest-to-rest ramp, and
+    on from there (the path's big detours, each ramp tried once); around each vertex left (from halfway along the
+    segment before to halfway along the one after, else a quarter, a tenth of the way: short ramps, few checks, no
+    stop left where one is valid); between random times (`draws`, shares of the duration). Each pass stops once the
+    run's checks reach its budget, and no ramp is tried whose whole check needs more checks than the budget has left."""
+    budget = run.budget
+    run.marks = np.array([0.0] + [float(t) for t, v in zip(run.traj.t[1:-1], run.traj.v[1:]) if not v.any()]
+                         + [run.traj.duration])  # the vertices, where the robot rests
+    i = 0
+    while i < len(run.marks) - 2 and run.checks < budget:
+        j = next((j for j in range(len(run.marks) - 1, i + 1, -1) if run.attempt(run.marks[i], run.marks[j])), None)
+        if j is not None:
+            run.marks = np.delete(run.marks, np.arange(i + 1, j))
+        i += 1
+    for k in range(1, len(run.marks) - 1):
+        for part in CORNERS:  # a corner cut nearer the vertex leaves the checked path less: more likely valid
+            if run.checks >= budget:
+                break
+            m = run.marks
+            if run.attempt(m[k] - part * (m[k] - m[k - 1]), m[k] + part * (m[k + 1] - m[k])):
+                break
+    k = run.next_draw(draws)
+    while k is not None and run.checks < budget:
+        if run.attempt(*np.sort(draws[k] * run.traj.duration)):
+            run.gains = None  # the trajectory changed: the draws left are judged again on the new one
         k = run.next_draw(draws)
-        while k is not None and run.checks < budget:
-            if run.attempt(*np.sort(draws[k] * run.traj.duration)):
-                run.gains = None  # the trajectory changed: the draws left are judged again on the new one
-            k = run.next_draw(draws)
-        return SmoothedRun(run.pieces, run.traj, run.ends, run.checks, run.shortcuts)
 
 
 class _Run:
     """One run being smoothed: its trajectory, the times its pieces end, times to follow (`marks`, mapped with each
     shortcut), the validities made so far and the figures."""
 
-    def __init__(self, smoother: Smoother, pieces: list[Piece], traj: Trajectory, ends: np.ndarray, budget: int):
+    def __init__(self, smoother: Smoother, pieces: list[Piece], traj: Trajectory, ends: np.ndarray, budget: int,
+                 screened: bool):
         self.smoother, self.pieces, self.traj, self.ends = smoother, pieces, traj, ends
         self.budget = budget  # the collision checks the run may make
+        self.screened = screened  # shortcuts kept on their screen (tentative.py), else on their whole check
+        self.survivors = Survivors()
+        self.made = 0  # the checks made
         self.moves = np.array([np.ptp(p.path, axis=0) > 0 for p in pieces])  # the joints each piece moves
         robot = smoother.validities.robot
         self.fingers = np.isin(np.arange(robot.nq), np.concatenate([robot.hand_idx[a] for a in robot.spec.arm_names]))
         self.checks_of: dict[tuple[int, int, bool, bytes], tuple[Validity, ...]] = {}
         self.strict = next((p.situation for p in pieces if not p.situation.touching and not p.situation.support),
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
-        self.checks = self.shortcuts = 0
+        self.shortcuts = 0
         self.marks = np.zeros(0)
         self.drawn = 0  # the random pass: the draws its chunks have taken so far,
         self.pending: np.ndarray | None = None  # the chunk's draws not attempted yet,
@@ -209,9 +229,15 @@ class _Run:
         hopeful = (span - p.min_gain > fastest) & (fastest > TINY)
         return np.where(hopeful, span - fastest, 0.0)
 
+    @property
+    def checks(self) -> int:
+        """The checks made, and those the rest of the surviving shortcuts' checks could make: what the budget bounds."""
+        return self.made + self.survivors.reserved
+
     def attempt(self, t1: float, t2: float) -> bool:
-        """Whether the ramp from the state at t1 to the one at t2 is faster and valid; then it replaces that span, and
-        the pieces' ends and the marks are mapped onto the new timing."""
+        """Whether the ramp from the state at t1 to the one at t2 is faster and passes its screen (or its whole check);
+        then it replaces that span, and the pieces' ends and the marks are mapped onto the new timing. A ramp whose
+        whole check, and its screen before, could need more checks than the run has left is not tried."""
         p = self.smoother
         if t2 - t1 <= p.min_gain:
             return False
@@ -222,10 +248,13 @@ class _Run:
         validities = self.validities(t1, t2, np.any(shortcut.v != 0, axis=0) | np.any(shortcut.a != 0, axis=0))
         if validities is None:
             return False
-        for v in validities:  # a curve that could need more checks than the run has left is not checked
+        most = sum(v.curve_checks(shortcut) for v in validities)
+        if most * (2 if self.screened else 1) > self.budget - self.checks:
+            return False
+        for v in validities:
             before = v.checks
-            valid = v.curve_valid(shortcut, most=self.budget - self.checks)
-            self.checks += v.checks - before
+            valid = v.curve_valid(shortcut, screen=self.screened)
+            self.made += v.checks - before
             if not valid:
                 return False
         self.shortcuts += 1
@@ -236,6 +265,8 @@ class _Run:
             return np.where(times >= t2, times - gain, np.where(inside, t1 + (times - t1) * shortcut.duration / (t2 - t1), times))
 
         self.traj = self.traj.splice(t1, t2, shortcut)
+        if self.screened:
+            self.survivors.splice(t1, t2, shortcut, validities, most)
         self.ends, self.marks = mapped(self.ends), mapped(self.marks)
         self.ends[-1] = self.traj.duration
         return True

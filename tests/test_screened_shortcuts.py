@@ -1,0 +1,144 @@
+"""The smoothing's lazy checks (planner/motion/tentative.py, segments.py): a curve screened by its first checks, then
+checked for the rest only where it is kept, tests every pair there as densely as its whole check would (measured by
+kinematics alone) and never more often; the parts of kept shortcuts are followed through later shortcuts; a
+shortcut kept on a screen that fails where it survives is never in the result."""
+from __future__ import annotations
+
+import dataclasses
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from test_pair_levels import _points, _recording
+
+from planner.collision.segments import SCREEN_LEVELS, SegmentChecker
+from planner.core.runner import run_pipeline
+from planner.core.session import Session
+from planner.motion.ramps import ramp
+from planner.motion.tentative import Survivors
+from planner.motion.trajectory import rest_to_rest
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
+
+
+@pytest.fixture(scope="module")
+def padded(default_collision):
+    cm = default_collision
+    return dataclasses.replace(cm, params=dataclasses.replace(cm.params, env_padding=0.03, self_padding=0.012))
+
+
+def test_a_curve_checked_for_the_rest_where_it_is_kept_tests_each_pair_there_as_its_whole_check_would(
+        default_scene, padded, monkeypatch):
+    """Random parabolic ramps from the rest pose, free by their whole check: screened, then checked for the rest over
+    one or two random spans. The two together make some of the whole check's configurations, never more; and every
+    pair tested less densely than the curve's count is tested, over each span, from a configuration at or before it to
+    one at or after it, moving between two of its tests (measured by kinematics on 600 samples of the curve) no more
+    than twice its margin over its clearance."""
+    cm, env_c, self_c = padded, 0.01, 0.004
+    seg = SegmentChecker(cm, env_c, self_c)
+    checks = _recording(seg, monkeypatch)
+    robot = default_scene.robot
+    model, gm = robot.model, cm.geometry
+    data, gd = model.createData(), pin.GeometryData(gm)
+    allow = cm.paddings() - np.where(np.isin(np.arange(len(cm.ends)), cm.subsets["env"]), env_c, self_c)
+    arms = np.concatenate([robot.arm_idx[a] for a in robot.spec.arm_names])
+    rng = np.random.default_rng(8)
+    vmax, amax = np.ones(robot.nq), np.full(robot.nq, 2.0)
+    curves = spared = 0
+    while curves < 3:
+        qa, qb, va = robot.q_rest.copy(), robot.q_rest.copy(), np.zeros(robot.nq)
+        qb[arms] = np.clip(qb[arms] + rng.normal(0.0, 0.35, len(arms)), robot.lower[arms], robot.upper[arms])
+        va[arms] = rng.uniform(-0.3, 0.3, len(arms))
+        curve = ramp(qa, va, qb, np.zeros(robot.nq), vmax, amax)
+        checks.clear()
+        if curve is None or seg.curve_first_hit(curve, "env") is not None:
+            continue
+        curves += 1
+        whole = {(q.tobytes(), pairs.tobytes()) for q, pairs in checks}
+        count = len(checks)
+        checks.clear()
+        assert seg.curve_first_hit(curve, "env", screen=True) is None
+        cuts = np.sort(rng.uniform(0.0, curve.duration, 4))
+        spans = cuts.reshape(2, 2)[: 1 + curves % 2]
+        assert seg.curve_first_hit(curve, "env", spans=spans) is None
+        made = [(q.tobytes(), pairs.tobytes()) for q, pairs in checks]
+        assert len(made) == len(set(made)) and set(made) <= whole, "only the whole check's configurations, each once"
+        spared += count - len(made)
+
+        times = np.linspace(0.0, curve.duration, 600)
+        dense = curve.positions(times)
+        poses = []
+        for q in dense:
+            pin.updateGeometryPlacements(model, data, gm, gd, q)
+            poses.append([gd.oMg[g].homogeneous for g in range(len(gm.geometryObjects))])
+        poses = np.array(poses)
+        at = np.array([int(np.argmin(np.linalg.norm(dense - q, axis=1))) for q, _ in checks])
+        counts = np.zeros(len(cm.ends), int)
+        for _, tested in checks:
+            counts[tested] += 1
+        sparse = [int(k) for k in cm.subsets["env"] if 0 < counts[k] < len(checks)]
+        for k in rng.choice(sparse, min(20, len(sparse)), replace=False):
+            moved, frame = (int(g) for g in cm.ends[k])
+            pts = _points(gm.geometryObjects[moved].geometry)
+            if pts is None:
+                moved, frame = frame, moved
+                pts = _points(gm.geometryObjects[moved].geometry)
+            rel = np.linalg.inv(poses[:, frame]) @ poses[:, moved]
+            world = np.einsum("mij,pj->mpi", rel[:, :3, :3], pts) + rel[:, None, :3, 3]
+            tested = np.unique(at[[k in set(t.tolist()) for _, t in checks]])
+            for t1, t2 in spans:
+                first, last = np.searchsorted(times, t1, "right") - 1, np.searchsorted(times, t2, "left")
+                assert tested[0] <= first + 1 and tested[-1] >= last - 1, f"pair {k}: a span not bounded by its tests"
+                inside = tested[(tested >= tested[tested <= first + 1][-1]) & (tested <= tested[tested >= last - 1][0])]
+                for a, b in zip(inside[:-1], inside[1:]):
+                    moved_by = float(np.linalg.norm(world[a:b + 1] - world[a], axis=2).max())
+                    assert moved_by <= 2 * allow[k] + 2e-4, f"pair {k} moved {moved_by:.4f} m between two of its tests"
+    assert spared > 0, "checking the spans alone spared none of the whole checks"
+
+
+def test_the_parts_of_kept_shortcuts_follow_the_trajectory_through_later_shortcuts():
+    """Random shortcuts spliced into a rest-to-rest trajectory one after another: every part the bookkeeping keeps is
+    the trajectory there (its shortcut's motion at the part's own times), the parts never overlap, and what is held
+    back for their checks is the sum over the shortcuts that still have a part."""
+    rng = np.random.default_rng(2)
+    vmax, amax = np.array([1.0, 0.8, 1.2]), np.array([2.0, 1.5, 2.5])
+    traj = rest_to_rest(np.cumsum(rng.normal(0, 1, (9, 3)), axis=0), vmax, amax)
+    survivors, kept = Survivors(), 0
+    while kept < 12:
+        t1, t2 = np.sort(rng.uniform(0.0, traj.duration, 2))
+        (qa, qb), (va, vb) = traj.states(np.array([t1, t2]))
+        shortcut = ramp(qa, va, qb, vb, vmax, amax, t2 - t1)
+        if shortcut is None:
+            continue
+        traj = traj.splice(t1, t2, shortcut)
+        survivors.splice(t1, t2, shortcut, (), 100 + kept)
+        kept += 1
+        spans = sorted((p.start + p.a, p.start + p.b) for p in survivors.parts)
+        assert all(b1 <= a2 + 1e-9 for (_, b1), (a2, _) in zip(spans[:-1], spans[1:])), "parts overlap"
+        for p in survivors.parts:
+            own = np.linspace(p.a, p.b, 7)
+            ramp_q = survivors.shortcuts[p.seq][0].positions(own)
+            assert np.allclose(traj.positions(p.start + own), ramp_q, atol=1e-9), "a part is not the trajectory there"
+        alive = {p.seq for p in survivors.parts}
+        assert survivors.reserved == sum(100 + s for s in alive)
+    assert len({p.seq for p in survivors.parts}) < kept, "no shortcut was wholly replaced: the case is too easy"
+
+
+def test_a_shortcut_kept_on_a_blind_screen_is_not_in_the_result(tmp_path, monkeypatch):
+    """With the curves' levels screened by nothing, the example's smoothing keeps shortcuts whose checks then find them
+    colliding where they survive: the runs are smoothed again, each shortcut checked whole before it is kept, and the
+    motion is exactly the one planned with the screens (which kept no such shortcut), for more checks."""
+    shutil.copytree(EXAMPLE, tmp_path / "example")
+    example = Session.open(tmp_path / "example")
+    planned = []
+    for name, levels in (("screened", SCREEN_LEVELS), ("blind", 0)):
+        monkeypatch.setattr("planner.collision.segments.SCREEN_LEVELS", levels)
+        session = example.branch(tmp_path / name, "motion")
+        run_pipeline(session)
+        planned.append(session.result("motion"))
+    screened, blind = planned
+    assert np.array_equal(blind.q, screened.q) and np.array_equal(blind.t, screened.t)
+    spent = [sum(p["smoothing_checks"] for p in m.phases) for m in (blind, screened)]
+    assert spent[0] > spent[1], f"the blind screen cost no checks more ({spent})"
