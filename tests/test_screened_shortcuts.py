@@ -11,13 +11,15 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from oracle import motion_collisions
 from test_pair_levels import _points, _recording
 
-from planner.collision.segments import SCREEN_LEVELS, SegmentChecker
+from planner.collision.segments import SegmentChecker
+from planner.core.forked import cpu_budget
 from planner.core.runner import run_pipeline
 from planner.core.session import Session
 from planner.motion.ramps import ramp
-from planner.motion.tentative import Survivors
+from planner.motion.tentative import Outcome, Survivors
 from planner.motion.trajectory import rest_to_rest
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
@@ -105,7 +107,7 @@ def test_the_parts_of_kept_shortcuts_follow_the_trajectory_through_later_shortcu
     rng = np.random.default_rng(2)
     vmax, amax = np.array([1.0, 0.8, 1.2]), np.array([2.0, 1.5, 2.5])
     traj = rest_to_rest(np.cumsum(rng.normal(0, 1, (9, 3)), axis=0), vmax, amax)
-    survivors, kept = Survivors(), 0
+    survivors, kept = Survivors({}), 0
     while kept < 12:
         t1, t2 = np.sort(rng.uniform(0.0, traj.duration, 2))
         (qa, qb), (va, vb) = traj.states(np.array([t1, t2]))
@@ -113,32 +115,42 @@ def test_the_parts_of_kept_shortcuts_follow_the_trajectory_through_later_shortcu
         if shortcut is None:
             continue
         traj = traj.splice(t1, t2, shortcut)
-        survivors.splice(t1, t2, shortcut, (), 100 + kept)
+        survivors.splice(kept, Outcome((t1, t2), shortcut, (), 0, 100 + kept))
         kept += 1
         spans = sorted((p.start + p.a, p.start + p.b) for p in survivors.parts)
         assert all(b1 <= a2 + 1e-9 for (_, b1), (a2, _) in zip(spans[:-1], spans[1:])), "parts overlap"
         for p in survivors.parts:
             own = np.linspace(p.a, p.b, 7)
-            ramp_q = survivors.shortcuts[p.seq][0].positions(own)
+            ramp_q = survivors.kept[p.seq].shortcut.positions(own)
             assert np.allclose(traj.positions(p.start + own), ramp_q, atol=1e-9), "a part is not the trajectory there"
         alive = {p.seq for p in survivors.parts}
         assert survivors.reserved == sum(100 + s for s in alive)
     assert len({p.seq for p in survivors.parts}) < kept, "no shortcut was wholly replaced: the case is too easy"
 
 
+@pytest.mark.slow
 def test_a_shortcut_kept_on_a_blind_screen_is_not_in_the_result(tmp_path, monkeypatch):
     """With the curves' levels screened by nothing, the example's smoothing keeps shortcuts whose checks then find them
-    colliding where they survive: the runs are smoothed again, each shortcut checked whole before it is kept, and the
-    motion is exactly the one planned with the screens (which kept no such shortcut), for more checks."""
+    colliding where they survive: each is refused and the run smoothed again, the attempts before it replayed. Every
+    sample of the motion then passes the independent oracle (which, with the refusals skipped, finds the hands in the
+    desk), and the checks stay within the budget."""
+    monkeypatch.setattr("planner.collision.segments.SCREEN_LEVELS", 0)
+    failed = []
+    check = Survivors.check
+
+    def counted(self):
+        seq, checks = check(self)
+        failed.append(seq is not None)
+        return seq, checks
+
+    monkeypatch.setattr(Survivors, "check", counted)
     shutil.copytree(EXAMPLE, tmp_path / "example")
-    example = Session.open(tmp_path / "example")
-    planned = []
-    for name, levels in (("screened", SCREEN_LEVELS), ("blind", 0)):
-        monkeypatch.setattr("planner.collision.segments.SCREEN_LEVELS", levels)
-        session = example.branch(tmp_path / name, "motion")
+    session = Session.open(tmp_path / "example").branch(tmp_path / "weak", "motion")
+    with cpu_budget(1):  # the runs smoothed in this process, where the count is kept
         run_pipeline(session)
-        planned.append(session.result("motion"))
-    screened, blind = planned
-    assert np.array_equal(blind.q, screened.q) and np.array_equal(blind.t, screened.t)
-    spent = [sum(p["smoothing_checks"] for p in m.phases) for m in (blind, screened)]
-    assert spent[0] > spent[1], f"the blind screen cost no checks more ({spent})"
+    motion = session.result("motion")
+    assert any(failed), "no kept shortcut failed: the case shows nothing"
+    bad = motion_collisions(session, motion)
+    assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
+    budget = session.record_of("motion")["params"]["smooth_checks"]
+    assert sum(p["smoothing_checks"] for p in motion.phases) <= budget

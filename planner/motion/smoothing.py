@@ -24,7 +24,7 @@ from planner.collision.situation import Situation
 from planner.collision.validity import Validity
 from planner.motion.piece import TRANSIT_PARTS, Piece
 from planner.motion.ramps import TINY, min_times, ramp
-from planner.motion.tentative import Survivors
+from planner.motion.tentative import Outcome, Survivors
 from planner.motion.trajectory import Trajectory, rest_to_rest
 from planner.motion.validities import Validities
 
@@ -109,23 +109,26 @@ class Smoother:
     def smooth(self, pieces: list[Piece], rng: np.random.Generator, attempts: int, budget: int) -> SmoothedRun:
         """The run's pieces timed rest to rest at every vertex, then shortened by shortcuts in three passes (see
         `passes`) kept on a screen, the rest of their checks made where they survive (tentative.py). Should a surviving
-        part fail, the run is smoothed again from the start with what is left of `budget`, each shortcut checked whole
-        before it is kept."""
+        part fail, the run is smoothed again with that attempt refused, the ones before it replayed from their
+        outcomes; the checks made, replays' and failures' included, stay within `budget`."""
         timed = [(p, rest_to_rest(p.path, self.vmax, self.amax)) for p in pieces]
         timed = [(p, t) for p, t in timed if t is not None]
         if not timed:
             return SmoothedRun([], None, np.zeros(0), 0, 0)
         draws = rng.random((attempts, 2))  # each random shortcut's two times, as shares of the run's duration then
         start = ([p for p, _ in timed], Trajectory.joined([t for _, t in timed]), np.cumsum([t.duration for _, t in timed]))
-        run = _Run(self, *start, budget, screened=True)
-        passes(run, draws)
-        valid, checks = run.survivors.check()
-        spent = run.made + checks
-        if not valid:
-            run = _Run(self, *start, budget - spent, screened=False)
+        record: list[Outcome] = []
+        checked: dict[int, list[tuple[float, float]]] = {}
+        spent = 0
+        while True:
+            run = _Run(self, *start, budget, record, Survivors(checked), spent)
             passes(run, draws)
-            spent += run.made
-        return SmoothedRun(run.pieces, run.traj, run.ends, spent, run.shortcuts)
+            failed, checks = run.survivors.check()
+            spent = run.spent + checks
+            if failed is None:
+                return SmoothedRun(run.pieces, run.traj, run.ends, spent, run.shortcuts)
+            record = run.log[:failed] + [Outcome(run.log[failed].times)]
+            checked = {seq: spans for seq, spans in checked.items() if seq < failed}
 
 
 def passes(run: "_Run", draws: np.ndarray) -> None:
@@ -162,12 +165,13 @@ class _Run:
     shortcut), the validities made so far and the figures."""
 
     def __init__(self, smoother: Smoother, pieces: list[Piece], traj: Trajectory, ends: np.ndarray, budget: int,
-                 screened: bool):
+                 record: list[Outcome], survivors: Survivors, spent: int):
         self.smoother, self.pieces, self.traj, self.ends = smoother, pieces, traj, ends
-        self.budget = budget  # the collision checks the run may make
-        self.screened = screened  # shortcuts kept on their screen (tentative.py), else on their whole check
-        self.survivors = Survivors()
-        self.made = 0  # the checks made
+        self.budget = budget  # the collision checks the smoothing may make
+        self.record, self.log = record, []  # the outcomes to replay; this smoothing's
+        self.survivors = survivors
+        self.spent = spent  # the checks made, by the run's smoothings before this one too
+        self.screens = 0  # the checks of this smoothing's screens, replayed ones included
         self.moves = np.array([np.ptp(p.path, axis=0) > 0 for p in pieces])  # the joints each piece moves
         robot = smoother.validities.robot
         self.fingers = np.isin(np.arange(robot.nq), np.concatenate([robot.hand_idx[a] for a in robot.spec.arm_names]))
@@ -231,33 +235,25 @@ class _Run:
 
     @property
     def checks(self) -> int:
-        """The checks made, and those the rest of the surviving shortcuts' checks could make: what the budget bounds."""
-        return self.made + self.survivors.reserved
+        """What the passes count against the budget: this smoothing's screens (replayed ones too, so that a replay
+        follows the same course) and what the surviving shortcuts' checks could make."""
+        return self.screens + self.survivors.reserved
 
     def attempt(self, t1: float, t2: float) -> bool:
-        """Whether the ramp from the state at t1 to the one at t2 is faster and passes its screen (or its whole check);
-        then it replaces that span, and the pieces' ends and the marks are mapped onto the new timing. A ramp whose
-        whole check, and its screen before, could need more checks than the run has left is not tried."""
-        p = self.smoother
-        if t2 - t1 <= p.min_gain:
+        """Whether the ramp from the state at t1 to the one at t2 is faster and passes its screen, or did so when this
+        attempt was made before (replayed while the attempts are those made before); then it replaces that span, and
+        the pieces' ends and the marks are mapped onto the new timing."""
+        seq = len(self.log)
+        out = self.record[seq] if seq < len(self.record) and self.record[seq].times == (t1, t2) else None
+        if out is None or (out.shortcut is not None and out.most > self._left()):  # no longer a replay
+            self.record = self.record[:seq]
+            out = self._try(t1, t2)
+        self.log.append(out)
+        self.screens += out.checks
+        if out.shortcut is None:
             return False
-        (qa, qb), (va, vb) = self.traj.states(np.array([t1, t2]))
-        shortcut = ramp(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
-        if shortcut is None:
-            return False
-        validities = self.validities(t1, t2, np.any(shortcut.v != 0, axis=0) | np.any(shortcut.a != 0, axis=0))
-        if validities is None:
-            return False
-        most = sum(v.curve_checks(shortcut) for v in validities)
-        if most * (2 if self.screened else 1) > self.budget - self.checks:
-            return False
-        for v in validities:
-            before = v.checks
-            valid = v.curve_valid(shortcut, screen=self.screened)
-            self.made += v.checks - before
-            if not valid:
-                return False
         self.shortcuts += 1
+        shortcut = out.shortcut
         gain = t2 - t1 - shortcut.duration
 
         def mapped(times: np.ndarray) -> np.ndarray:
@@ -265,8 +261,37 @@ class _Run:
             return np.where(times >= t2, times - gain, np.where(inside, t1 + (times - t1) * shortcut.duration / (t2 - t1), times))
 
         self.traj = self.traj.splice(t1, t2, shortcut)
-        if self.screened:
-            self.survivors.splice(t1, t2, shortcut, validities, most)
+        self.survivors.splice(seq, out)
         self.ends, self.marks = mapped(self.ends), mapped(self.marks)
         self.ends[-1] = self.traj.duration
         return True
+
+    def _left(self) -> int:
+        """The checks the budget has left beyond those made and those held back for the surviving shortcuts."""
+        return self.budget - self.spent - self.survivors.reserved
+
+    def _try(self, t1: float, t2: float) -> Outcome:
+        """A new attempt (see attempt): a ramp whose screen and whole check could need more checks than the budget has
+        left is not tried."""
+        p, refused = self.smoother, Outcome((t1, t2))
+        if t2 - t1 <= p.min_gain:
+            return refused
+        (qa, qb), (va, vb) = self.traj.states(np.array([t1, t2]))
+        shortcut = ramp(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
+        if shortcut is None:
+            return refused
+        validities = self.validities(t1, t2, np.any(shortcut.v != 0, axis=0) | np.any(shortcut.a != 0, axis=0))
+        if validities is None:
+            return refused
+        most = sum(v.curve_checks(shortcut) for v in validities)
+        if 2 * most > self._left():
+            return refused
+        checks = 0
+        for v in validities:
+            before = v.checks
+            valid = v.curve_valid(shortcut, screen=True)
+            checks += v.checks - before
+            if not valid:
+                break
+        self.spent += checks
+        return Outcome((t1, t2), shortcut if valid else None, validities, checks, most)

@@ -4,7 +4,9 @@ A shortcut of the smoothing (smoothing.py) is kept when its curve passes a scree
 where nearly every curve that fails is found to fail. Later shortcuts replace much of what earlier ones made, so the
 rest of a kept shortcut's checks are made only for the parts of it still in the run's trajectory when the smoothing is
 done: the configurations of its own checks that bound those parts, so never more than its whole check. Until then
-each kept shortcut holds back the checks its whole check could make, so the run's budget bounds what is spent.
+each kept shortcut holds back the checks its whole check could make, so the run's budget bounds what is spent. A part
+that fails is taken back: the run is smoothed again with that attempt refused, the attempts before it replayed from
+their outcomes (`Outcome`), not checked again.
 """
 from __future__ import annotations
 
@@ -18,9 +20,21 @@ from planner.motion.trajectory import Trajectory
 
 
 @dataclass(frozen=True)
+class Outcome:
+    """An attempted shortcut between the run's times `times`: the ramp kept (None: refused), what checks it, the checks
+    its screen made and the most its whole check could make."""
+
+    times: tuple[float, float]
+    shortcut: Trajectory | None = None
+    validities: tuple = ()
+    checks: int = 0
+    most: int = 0
+
+
+@dataclass(frozen=True)
 class Kept:
     """The part [a, b] of a kept shortcut's own time that is still in the run's trajectory, whose time `start` is the
-    shortcut's time 0; `seq`: which shortcut (in the order kept)."""
+    shortcut's time 0; `seq`: the attempt that kept it."""
 
     seq: int
     start: float
@@ -29,21 +43,19 @@ class Kept:
 
 
 class Survivors:
-    """The parts of kept shortcuts in a run's trajectory, mapped through each shortcut that replaces a span of it, with
-    what checks each shortcut and how many checks its whole check could make."""
+    """The parts of kept shortcuts in a run's trajectory, mapped through each shortcut that replaces a span of it.
+    `checked`: per attempt, spans of its shortcut's own time whose checks passed (kept across the run's smoothings)."""
 
-    def __init__(self):
+    def __init__(self, checked: dict[int, list[tuple[float, float]]]):
         self.parts: list[Kept] = []
-        self.shortcuts: list[tuple[Trajectory, tuple, int]] = []  # (curve, validities, most checks) per seq
+        self.kept: dict[int, Outcome] = {}
+        self.checked = checked
+        self.reserved = 0  # the checks the rest of the surviving shortcuts' checks could make at most
 
-    @property
-    def reserved(self) -> int:
-        """The checks the rest of the surviving shortcuts' checks could make at most."""
-        return sum(self.shortcuts[seq][2] for seq in {p.seq for p in self.parts})
-
-    def splice(self, t1: float, t2: float, shortcut: Trajectory, validities: tuple, most: int) -> None:
-        """The span [t1, t2] replaced by `shortcut`, whose whole check could make `most` checks: what lay inside is gone,
-        what lay after moves earlier by the time saved."""
+    def splice(self, seq: int, kept: Outcome) -> None:
+        """The shortcut kept by attempt `seq` replaces its span: what lay inside is gone, what lay after moves earlier by
+        the time saved."""
+        (t1, t2), shortcut = kept.times, kept.shortcut
         gain = t2 - t1 - shortcut.duration
         out = []
         for p in self.parts:
@@ -52,21 +64,29 @@ class Survivors:
                 out.append(dataclasses.replace(p, b=min(hi, t1) - p.start))
             if hi > t2:
                 out.append(dataclasses.replace(p, start=p.start - gain, a=max(lo, t2) - p.start))
-        out.append(Kept(len(self.shortcuts), t1, 0.0, shortcut.duration))
-        self.shortcuts.append((shortcut, validities, most))
+        out.append(Kept(seq, t1, 0.0, shortcut.duration))
+        self.kept[seq] = kept
         self.parts = [p for p in out if p.b - p.a > TINY]
+        self.reserved = sum(self.kept[seq].most for seq in self._unchecked())
 
-    def check(self) -> tuple[bool, int]:
-        """(whether the rest of each surviving shortcut's checks pass where it survives, the checks made), in the order
-        the shortcuts were kept, stopping at the first that fails."""
+    def _unchecked(self) -> list[int]:
+        """The attempts, in order, with a surviving part not yet checked."""
+        done = self.checked
+        return sorted({p.seq for p in self.parts
+                       if not any(a <= p.a and p.b <= b for a, b in done.get(p.seq, ()))})
+
+    def check(self) -> tuple[int | None, int]:
+        """(the first attempt, in order, the rest of whose checks fail where its shortcut survives, else None; the
+        checks made)."""
         checks = 0
-        for seq in sorted({p.seq for p in self.parts}):
-            curve, validities, _ = self.shortcuts[seq]
-            spans = np.array([(p.a, p.b) for p in self.parts if p.seq == seq])
-            for v in validities:
+        for seq in self._unchecked():
+            kept = self.kept[seq]
+            spans = [(p.a, p.b) for p in self.parts if p.seq == seq]
+            for v in kept.validities:
                 before = v.checks
-                valid = v.curve_valid(curve, spans=spans)
+                valid = v.curve_valid(kept.shortcut, spans=np.array(spans))
                 checks += v.checks - before
                 if not valid:
-                    return False, checks
-        return True, checks
+                    return seq, checks
+            self.checked.setdefault(seq, []).extend(spans)
+        return None, checks
