@@ -219,6 +219,47 @@ def test_level_subsets_are_kept_only_while_recent(default_scene, padded):
     assert len(seg.checker._tables) <= LEVEL_SUBSETS + len(padded.subsets)
 
 
+def random_ramp(robot, rng: np.random.Generator, spread: float):
+    """A parabolic ramp from the rest pose to the arms moved by about `spread` rad each, leaving at a random arm
+    velocity (as the smoothing's curves do), at 1 rad/s and 2 rad/s^2; None when no ramp joins them."""
+    arms = np.concatenate([robot.arm_idx[a] for a in robot.spec.arm_names])
+    qa, qb, va = robot.q_rest.copy(), robot.q_rest.copy(), np.zeros(robot.nq)
+    qb[arms] = np.clip(qb[arms] + rng.normal(0.0, spread, len(arms)), robot.lower[arms], robot.upper[arms])
+    va[arms] = rng.uniform(-0.3, 0.3, len(arms))
+    return ramp(qa, va, qb, np.zeros(robot.nq), np.ones(robot.nq), np.full(robot.nq, 2.0))
+
+
+class PairMotion:
+    """How each pair's geometries move relative to each other along a curve: pinocchio's kinematics alone on `samples`
+    evenly spaced times, and, for a pair, its moving geometry's points in the other's frame (see `_points`)."""
+
+    def __init__(self, cm, curve, samples: int):
+        model, gm = cm.robot.model, cm.geometry
+        data, gd = model.createData(), pin.GeometryData(gm)
+        self.cm, self.times = cm, np.linspace(0.0, curve.duration, samples)
+        self.dense = curve.positions(self.times)
+        poses = []
+        for q in self.dense:
+            pin.updateGeometryPlacements(model, data, gm, gd, q)
+            poses.append([gd.oMg[g].homogeneous for g in range(len(gm.geometryObjects))])
+        self.poses = np.array(poses)
+
+    def sample_of(self, q: np.ndarray) -> int:
+        """The sample nearest a configuration of the curve."""
+        return int(np.argmin(np.linalg.norm(self.dense - q, axis=1)))
+
+    def points(self, pair: int) -> np.ndarray:
+        """(samples, points, 3) one geometry's points of the pair in the other's frame, at every sample."""
+        objects = self.cm.geometry.geometryObjects
+        moved, frame = (int(g) for g in self.cm.ends[pair])
+        pts = _points(objects[moved].geometry)
+        if pts is None:
+            moved, frame = frame, moved
+            pts = _points(objects[moved].geometry)
+        rel = np.linalg.inv(self.poses[:, frame]) @ self.poses[:, moved]
+        return np.einsum("mij,pj->mpi", rel[:, :3, :3], pts) + rel[:, None, :3, 3]
+
+
 @pytest.mark.slow
 def test_a_curve_tests_each_pair_often_enough_for_its_own_motion(default_scene, padded, monkeypatch):
     """Along random parabolic ramps from the rest pose (the smoothing's curves), a pair tested at fewer configurations
@@ -229,44 +270,27 @@ def test_a_curve_tests_each_pair_often_enough_for_its_own_motion(default_scene, 
     seg = SegmentChecker(cm, env_c, self_c)
     checks = _recording(seg, monkeypatch)
     robot = default_scene.robot
-    model, gm = robot.model, cm.geometry
-    data, gd = model.createData(), pin.GeometryData(gm)
     allow = cm.paddings() - np.where(np.isin(np.arange(len(cm.ends)), cm.subsets["env"]), env_c, self_c)
-    arms = np.concatenate([robot.arm_idx[a] for a in robot.spec.arm_names])
     rng = np.random.default_rng(4)
-    vmax, amax = np.ones(robot.nq), np.full(robot.nq, 2.0)
     curves = tested_sparsely = 0
     while curves < 2:
-        qa, qb, va = robot.q_rest.copy(), robot.q_rest.copy(), np.zeros(robot.nq)
-        qb[arms] = np.clip(qb[arms] + rng.normal(0.0, 0.3, len(arms)), robot.lower[arms], robot.upper[arms])
-        va[arms] = rng.uniform(-0.3, 0.3, len(arms))
-        curve = ramp(qa, va, qb, np.zeros(robot.nq), vmax, amax)
+        curve = random_ramp(robot, rng, 0.3)
         checks.clear()
+        qb = None if curve is None else curve.end
         if curve is None or not seg.free(qb, "env") or seg.curve_first_hit(curve, "env") is not None:
             continue
         curves += 1
-        dense = curve.positions(np.linspace(0.0, curve.duration, 1000))
-        poses = []
-        for q in dense:
-            pin.updateGeometryPlacements(model, data, gm, gd, q)
-            poses.append([gd.oMg[g].homogeneous for g in range(len(gm.geometryObjects))])
-        poses = np.array(poses)
-        at = np.array([int(np.argmin(np.linalg.norm(dense - q, axis=1))) for q, _ in checks])
+        motion = PairMotion(cm, curve, 1000)
+        at = np.array([motion.sample_of(q) for q, _ in checks])
         counts = np.zeros(len(cm.ends), int)
         for _, tested in checks:
             counts[tested] += 1
         sparse = [int(k) for k in cm.subsets["env"] if counts[k] < len(checks)]
         tested_sparsely += len(sparse)
         for k in rng.choice(sparse, min(25, len(sparse)), replace=False):
-            moved, frame = (int(g) for g in cm.ends[k])
-            pts = _points(gm.geometryObjects[moved].geometry)
-            if pts is None:
-                moved, frame = frame, moved
-                pts = _points(gm.geometryObjects[moved].geometry)
-            rel = np.linalg.inv(poses[:, frame]) @ poses[:, moved]
-            world = np.einsum("mij,pj->mpi", rel[:, :3, :3], pts) + rel[:, None, :3, 3]
+            world = motion.points(k)
             tested = np.unique(at[[k in set(t.tolist()) for _, t in checks]])
-            assert tested[0] == 0 and tested[-1] == len(dense) - 1, "both ends"
+            assert tested[0] == 0 and tested[-1] == len(motion.dense) - 1, "both ends"
             for a, b in zip(tested[:-1], tested[1:]):
                 moved_by = float(np.linalg.norm(world[a:b + 1] - world[a], axis=2).max())
                 assert moved_by <= 2 * allow[k] + 2e-4, f"pair {k} moved {moved_by:.4f} m between two of its tests"

@@ -9,10 +9,9 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 import pytest
 from oracle import motion_collisions
-from test_pair_levels import _points, _recording
+from test_pair_levels import PairMotion, _recording, random_ramp
 
 from planner.collision.segments import SegmentChecker
 from planner.core.forked import cpu_budget
@@ -41,19 +40,11 @@ def test_a_curve_checked_for_the_rest_where_it_is_kept_tests_each_pair_there_as_
     cm, env_c, self_c = padded, 0.01, 0.004
     seg = SegmentChecker(cm, env_c, self_c)
     checks = _recording(seg, monkeypatch)
-    robot = default_scene.robot
-    model, gm = robot.model, cm.geometry
-    data, gd = model.createData(), pin.GeometryData(gm)
     allow = cm.paddings() - np.where(np.isin(np.arange(len(cm.ends)), cm.subsets["env"]), env_c, self_c)
-    arms = np.concatenate([robot.arm_idx[a] for a in robot.spec.arm_names])
     rng = np.random.default_rng(8)
-    vmax, amax = np.ones(robot.nq), np.full(robot.nq, 2.0)
     curves = spared = 0
     while curves < 3:
-        qa, qb, va = robot.q_rest.copy(), robot.q_rest.copy(), np.zeros(robot.nq)
-        qb[arms] = np.clip(qb[arms] + rng.normal(0.0, 0.35, len(arms)), robot.lower[arms], robot.upper[arms])
-        va[arms] = rng.uniform(-0.3, 0.3, len(arms))
-        curve = ramp(qa, va, qb, np.zeros(robot.nq), vmax, amax)
+        curve = random_ramp(default_scene.robot, rng, 0.35)
         checks.clear()
         if curve is None or seg.curve_first_hit(curve, "env") is not None:
             continue
@@ -69,29 +60,18 @@ def test_a_curve_checked_for_the_rest_where_it_is_kept_tests_each_pair_there_as_
         assert len(made) == len(set(made)) and set(made) <= whole, "only the whole check's configurations, each once"
         spared += count - len(made)
 
-        times = np.linspace(0.0, curve.duration, 600)
-        dense = curve.positions(times)
-        poses = []
-        for q in dense:
-            pin.updateGeometryPlacements(model, data, gm, gd, q)
-            poses.append([gd.oMg[g].homogeneous for g in range(len(gm.geometryObjects))])
-        poses = np.array(poses)
-        at = np.array([int(np.argmin(np.linalg.norm(dense - q, axis=1))) for q, _ in checks])
+        motion = PairMotion(cm, curve, 600)
+        at = np.array([motion.sample_of(q) for q, _ in checks])
         counts = np.zeros(len(cm.ends), int)
         for _, tested in checks:
             counts[tested] += 1
         sparse = [int(k) for k in cm.subsets["env"] if 0 < counts[k] < len(checks)]
         for k in rng.choice(sparse, min(20, len(sparse)), replace=False):
-            moved, frame = (int(g) for g in cm.ends[k])
-            pts = _points(gm.geometryObjects[moved].geometry)
-            if pts is None:
-                moved, frame = frame, moved
-                pts = _points(gm.geometryObjects[moved].geometry)
-            rel = np.linalg.inv(poses[:, frame]) @ poses[:, moved]
-            world = np.einsum("mij,pj->mpi", rel[:, :3, :3], pts) + rel[:, None, :3, 3]
+            world = motion.points(k)
             tested = np.unique(at[[k in set(t.tolist()) for _, t in checks]])
             for t1, t2 in spans:
-                first, last = np.searchsorted(times, t1, "right") - 1, np.searchsorted(times, t2, "left")
+                first = np.searchsorted(motion.times, t1, "right") - 1
+                last = np.searchsorted(motion.times, t2, "left")
                 assert tested[0] <= first + 1 and tested[-1] >= last - 1, f"pair {k}: a span not bounded by its tests"
                 inside = tested[(tested >= tested[tested <= first + 1][-1]) & (tested <= tested[tested >= last - 1][0])]
                 for a, b in zip(inside[:-1], inside[1:]):
