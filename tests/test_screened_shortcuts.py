@@ -134,3 +134,65 @@ def test_a_shortcut_kept_on_a_blind_screen_is_not_in_the_result(tmp_path, monkey
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
     budget = session.record_of("motion")["params"]["smooth_checks"]
     assert sum(p["smoothing_checks"] for p in motion.phases) <= budget
+
+
+class _Counted:
+    """A stand-in validity that counts checks as the real ones bound them: a curve's whole check could make 100, its
+    screen makes 10, the rest over some spans 60 and 28 per share of the curve's time they cover (at most 88: never
+    more than the whole); the rest fails on the shortcuts `bad(curve)` names, so some kept shortcuts are refused."""
+
+    def __init__(self, bad):
+        self.checks, self.bad = 0, bad
+
+    def curve_checks(self, curve) -> int:
+        return 100
+
+    def curve_valid(self, curve, ends=True, most=None, screen=False, spans=None) -> bool:
+        if screen:
+            self.checks += 10
+            return True
+        self.checks += 60 + int(np.ceil(28 * sum(b - a for a, b in spans) / curve.duration))
+        return not self.bad(curve)
+
+
+@pytest.mark.parametrize("budget", [300, 700, 1500, 4000])
+def test_the_checks_held_back_keep_every_smoothing_within_its_budget(budget, monkeypatch):
+    """A run of one random polyline smoothed with the stand-in validity (a shortcut in five fails the rest of its
+    checks): every check made, screens, the rest of the kept shortcuts' checks (made early when what is held back
+    leaves too little), and those of the smoothings taken again after a refusal, stays within the budget; what the
+    result keeps of each shortcut passed; one seed, one result."""
+    from types import SimpleNamespace
+
+    from planner.motion.smoothing import Smoother, _Run
+
+    def bad(curve) -> bool:
+        return int(curve.duration * 1e6) % 5 == 0
+
+    validity = _Counted(bad)
+    monkeypatch.setattr(_Run, "validities", lambda self, t1, t2, moves: (validity,))
+    robot = SimpleNamespace(nq=3, hand_idx={"right": np.array([], int)}, spec=SimpleNamespace(arm_names=["right"]))
+    smoother = Smoother(SimpleNamespace(robot=robot), np.ones(3), np.full(3, 2.0), 0.02)
+    path = np.cumsum(np.random.default_rng(3).normal(0, 1, (12, 3)), axis=0)
+    situation = SimpleNamespace(touching=(), support=(), holder=None, pose=np.eye(4))
+    pieces = [SimpleNamespace(phase=0, part="transit", path=path, situation=situation)]
+    made = []
+    init = _Run.__init__
+
+    def recorded(self, *args):
+        init(self, *args)
+        made.append(self)
+
+    monkeypatch.setattr(_Run, "__init__", recorded)
+    results = []
+    for _ in range(2):
+        before, made[:] = validity.checks, []
+        run = smoother.smooth(pieces, np.random.default_rng(7), 400, budget)
+        assert run.checks == validity.checks - before <= budget
+        last = made[-1].survivors
+        assert not any(bad(last.kept[p.seq].shortcut) for p in last.parts), "a failing shortcut is in the result"
+        results.append((run, len(made)))
+    (run, smoothings), (again, _) = results
+    assert np.array_equal(run.trajectory.q, again.trajectory.q) and run.checks == again.checks
+    if budget >= 1500:
+        assert smoothings > 1, "no kept shortcut was refused: the case shows nothing"
+        assert run.shortcuts > 0 and run.trajectory.duration < smoother.rest_to_rest(pieces)

@@ -122,9 +122,12 @@ class Smoother:
         spent = 0
         while True:
             run = _Run(self, *start, budget, record, Survivors(checked), spent)
-            passes(run, draws)
-            failed, checks = run.survivors.check()
-            spent = run.spent + checks
+            try:
+                passes(run, draws)
+                failed = run.settle()
+            except Retake as retake:
+                failed = retake.seq
+            spent = run.spent
             if failed is None:
                 return SmoothedRun(run.pieces, run.traj, run.ends, spent, run.shortcuts)
             record = run.log[:failed] + [Outcome(run.log[failed].times)]
@@ -158,6 +161,14 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
         if run.attempt(*np.sort(draws[k] * run.traj.duration)):
             run.gains = None  # the trajectory changed: the draws left are judged again on the new one
         k = run.next_draw(draws)
+
+
+class Retake(Exception):
+    """A kept shortcut failed the rest of its checks while the run was being smoothed: attempt `seq` is to be refused."""
+
+    def __init__(self, seq: int):
+        super().__init__(seq)
+        self.seq = seq
 
 
 class _Run:
@@ -266,6 +277,13 @@ class _Run:
         self.ends[-1] = self.traj.duration
         return True
 
+    def settle(self) -> int | None:
+        """The rest of the surviving shortcuts' checks made now (see Survivors.check): the first attempt whose shortcut
+        fails them, else None."""
+        failed, checks = self.survivors.check()
+        self.spent += checks
+        return failed
+
     def _left(self) -> int:
         """The checks the budget has left beyond those made and those held back for the surviving shortcuts."""
         return self.budget - self.spent - self.survivors.reserved
@@ -284,6 +302,10 @@ class _Run:
         if validities is None:
             return refused
         most = sum(v.curve_checks(shortcut) for v in validities)
+        if 2 * most > self._left() and self.survivors.reserved:  # what is held back is far more than the checks need
+            failed = self.settle()
+            if failed is not None:
+                raise Retake(failed)
         if 2 * most > self._left():
             return refused
         checks = 0

@@ -67,6 +67,9 @@ class Survivors:
         out.append(Kept(seq, t1, 0.0, shortcut.duration))
         self.kept[seq] = kept
         self.parts = [p for p in out if p.b - p.a > TINY]
+        self._reserve()
+
+    def _reserve(self) -> None:
         self.reserved = sum(self.kept[seq].most for seq in self._unchecked())
 
     def _unchecked(self) -> list[int]:
@@ -89,4 +92,5 @@ class Survivors:
                 if not valid:
                     return seq, checks
             self.checked.setdefault(seq, []).extend(spans)
+        self._reserve()  # nothing left to hold back
         return None, checks
