@@ -83,29 +83,32 @@ def test_a_curve_checked_for_the_rest_where_it_is_kept_tests_each_pair_there_as_
 def test_the_parts_of_kept_shortcuts_follow_the_trajectory_through_later_shortcuts():
     """Random shortcuts spliced into a rest-to-rest trajectory one after another: every part the bookkeeping keeps is
     the trajectory there (its shortcut's motion at the part's own times), the parts never overlap, and what is held
-    back for their checks is the sum over the shortcuts that still have a part."""
+    back for their checks is the sum over the shortcuts that still have a part not checked: every third shortcut is
+    checked whole when kept, and none of its parts is ever held back for again, however it is cut."""
     rng = np.random.default_rng(2)
     vmax, amax = np.array([1.0, 0.8, 1.2]), np.array([2.0, 1.5, 2.5])
     traj = rest_to_rest(np.cumsum(rng.normal(0, 1, (9, 3)), axis=0), vmax, amax)
     survivors, kept = Survivors({}), 0
-    while kept < 12:
+    while kept < 24:
         t1, t2 = np.sort(rng.uniform(0.0, traj.duration, 2))
         (qa, qb), (va, vb) = traj.states(np.array([t1, t2]))
         shortcut = ramp(qa, va, qb, vb, vmax, amax, t2 - t1)
         if shortcut is None:
             continue
         traj = traj.splice(t1, t2, shortcut)
-        survivors.splice(kept, Outcome((t1, t2), shortcut, (), 0, 100 + kept))
+        survivors.splice(kept, Outcome((t1, t2), shortcut, (), 0, 100 + kept, whole=kept % 3 == 0))
         kept += 1
         spans = sorted((p.start + p.a, p.start + p.b) for p in survivors.parts)
         assert all(b1 <= a2 + 1e-9 for (_, b1), (a2, _) in zip(spans[:-1], spans[1:])), "parts overlap"
         for p in survivors.parts:
+            assert 0.0 <= p.a < p.b <= survivors.kept[p.seq].shortcut.duration, "a part left its shortcut's own time"
             own = np.linspace(p.a, p.b, 7)
             ramp_q = survivors.kept[p.seq].shortcut.positions(own)
             assert np.allclose(traj.positions(p.start + own), ramp_q, atol=1e-9), "a part is not the trajectory there"
         alive = {p.seq for p in survivors.parts}
-        assert survivors.reserved == sum(100 + s for s in alive)
+        assert survivors.reserved == sum(100 + s for s in alive if s % 3)
     assert len({p.seq for p in survivors.parts}) < kept, "no shortcut was wholly replaced: the case is too easy"
+    assert any(p.seq % 3 == 0 and p.a > 0 for p in survivors.parts), "no shortcut checked whole was cut: too easy"
 
 
 @pytest.mark.slow
@@ -137,9 +140,10 @@ def test_a_shortcut_kept_on_a_blind_screen_is_not_in_the_result(tmp_path, monkey
 
 
 class _Counted:
-    """A stand-in validity that counts checks as the real ones bound them: a curve's whole check could make 100, its
-    screen makes 10, the rest over some spans 60 and 28 per share of the curve's time they cover (at most 88: never
-    more than the whole); the rest fails on the shortcuts `bad(curve)` names, so some kept shortcuts are refused."""
+    """A stand-in validity that counts checks as the real ones bound them: a curve's whole check could make 100 and
+    makes 95, its screen makes 10, the rest over some spans 60 and 28 per share of the curve's time they cover (at most
+    88: never more than the whole); the whole check and the rest fail on the shortcuts `bad(curve)` names, so some
+    shortcuts kept on their screen are refused."""
 
     def __init__(self, bad):
         self.checks, self.bad = 0, bad
@@ -151,6 +155,9 @@ class _Counted:
         if screen:
             self.checks += 10
             return True
+        if spans is None:  # checked whole
+            self.checks += 95
+            return not self.bad(curve)
         self.checks += 60 + int(np.ceil(28 * sum(b - a for a, b in spans) / curve.duration))
         return not self.bad(curve)
 
@@ -178,8 +185,8 @@ def test_the_checks_held_back_keep_every_smoothing_within_its_budget(budget, mon
     made = []
     init = _Run.__init__
 
-    def recorded(self, *args):
-        init(self, *args)
+    def recorded(self, *args, **kwargs):
+        init(self, *args, **kwargs)
         made.append(self)
 
     monkeypatch.setattr(_Run, "__init__", recorded)

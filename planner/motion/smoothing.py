@@ -7,8 +7,8 @@ timed rest to rest at every vertex (trajectory.py): exactly the checked polyline
 random stream, two times t1 < t2 of the run are joined by the time-optimal ramp between the states (positions and
 velocities) there (ramps.py); where it is faster and its curve passes a screen (its first checks: segments.py), it
 replaces that span, and the rest of its checks are made at the end, where it survives later shortcuts (tentative.py:
-the same displacement bound between checks as a straight segment; should one fail, the run is smoothed again with
-every shortcut checked whole before it is kept). Inside one piece it is checked with that
+the same displacement bound between checks as a straight segment; should one fail, that attempt is refused and the
+run smoothed again, the attempts before it replayed, the new ones checked whole). Inside one piece it is checked with that
 piece's own validity (a transit's paddings fitted to its ends, a contact motion's tight paddings); across pieces (a
 lift into a transit, a transit into an approach) with the transit profile in the object's situation without its
 exceptions (no fingertip nor support may touch), fitted to the ramp's ends: a hand near the object keeps the straight
@@ -110,7 +110,8 @@ class Smoother:
         """The run's pieces timed rest to rest at every vertex, then shortened by shortcuts in three passes (see
         `passes`) kept on a screen, the rest of their checks made where they survive (tentative.py). Should a surviving
         part fail, the run is smoothed again with that attempt refused, the ones before it replayed from their
-        outcomes; the checks made, replays' and failures' included, stay within `budget`."""
+        outcomes and the new ones checked whole; the checks made, replays' and failures' included, stay within
+        `budget`."""
         timed = [(p, rest_to_rest(p.path, self.vmax, self.amax)) for p in pieces]
         timed = [(p, t) for p, t in timed if t is not None]
         if not timed:
@@ -121,7 +122,7 @@ class Smoother:
         checked: dict[int, list[tuple[float, float]]] = {}
         spent = 0
         while True:
-            run = _Run(self, *start, budget, record, Survivors(checked), spent)
+            run = _Run(self, *start, budget, record, Survivors(checked), spent, eager=bool(record))
             try:
                 passes(run, draws)
                 failed = run.settle()
@@ -176,13 +177,14 @@ class _Run:
     shortcut), the validities made so far and the figures."""
 
     def __init__(self, smoother: Smoother, pieces: list[Piece], traj: Trajectory, ends: np.ndarray, budget: int,
-                 record: list[Outcome], survivors: Survivors, spent: int):
+                 record: list[Outcome], survivors: Survivors, spent: int, eager: bool):
         self.smoother, self.pieces, self.traj, self.ends = smoother, pieces, traj, ends
         self.budget = budget  # the collision checks the smoothing may make
         self.record, self.log = record, []  # the outcomes to replay; this smoothing's
         self.survivors = survivors
         self.spent = spent  # the checks made, by the run's smoothings before this one too
         self.screens = 0  # the checks of this smoothing's screens, replayed ones included
+        self.eager = eager  # new shortcuts checked whole (a screen of this run has let a colliding one through)
         self.moves = np.array([np.ptp(p.path, axis=0) > 0 for p in pieces])  # the joints each piece moves
         robot = smoother.validities.robot
         self.fingers = np.isin(np.arange(robot.nq), np.concatenate([robot.hand_idx[a] for a in robot.spec.arm_names]))
@@ -256,7 +258,7 @@ class _Run:
         the pieces' ends and the marks are mapped onto the new timing."""
         seq = len(self.log)
         out = self.record[seq] if seq < len(self.record) and self.record[seq].times == (t1, t2) else None
-        if out is None or (out.shortcut is not None and out.most > self._left()):  # no longer a replay
+        if out is None or (out.shortcut is not None and not out.whole and out.most > self._left()):  # no longer a replay
             self.record = self.record[:seq]
             out = self._try(t1, t2)
         self.log.append(out)
@@ -289,8 +291,9 @@ class _Run:
         return self.budget - self.spent - self.survivors.reserved
 
     def _try(self, t1: float, t2: float) -> Outcome:
-        """A new attempt (see attempt): a ramp whose screen and whole check could need more checks than the budget has
-        left is not tried."""
+        """A new attempt (see attempt). A ramp is screened while the budget has left what its screen and its whole
+        check could need (the surviving shortcuts' checks made at once first, should what they hold back leave less);
+        else it is checked whole, as far as its whole check fits, else not tried."""
         p, refused = self.smoother, Outcome((t1, t2))
         if t2 - t1 <= p.min_gain:
             return refused
@@ -306,14 +309,15 @@ class _Run:
             failed = self.settle()
             if failed is not None:
                 raise Retake(failed)
-        if 2 * most > self._left():
+        if most > self._left():
             return refused
+        whole = self.eager or 2 * most > self._left()
         checks = 0
         for v in validities:
             before = v.checks
-            valid = v.curve_valid(shortcut, screen=True)
+            valid = v.curve_valid(shortcut, screen=not whole)
             checks += v.checks - before
             if not valid:
                 break
         self.spent += checks
-        return Outcome((t1, t2), shortcut if valid else None, validities, checks, most)
+        return Outcome((t1, t2), shortcut if valid else None, validities, checks, most, whole)

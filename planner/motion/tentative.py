@@ -22,13 +22,14 @@ from planner.motion.trajectory import Trajectory
 @dataclass(frozen=True)
 class Outcome:
     """An attempted shortcut between the run's times `times`: the ramp kept (None: refused), what checks it, the checks
-    its screen made and the most its whole check could make."""
+    its screen made (or its whole check: `whole`) and the most its whole check could make."""
 
     times: tuple[float, float]
     shortcut: Trajectory | None = None
     validities: tuple = ()
     checks: int = 0
     most: int = 0
+    whole: bool = False
 
 
 @dataclass(frozen=True)
@@ -58,14 +59,16 @@ class Survivors:
         (t1, t2), shortcut = kept.times, kept.shortcut
         gain = t2 - t1 - shortcut.duration
         out = []
-        for p in self.parts:
+        for p in self.parts:  # a part's own times change only where it is cut (so that a part checked stays so)
             lo, hi = p.start + p.a, p.start + p.b
             if lo < t1:
-                out.append(dataclasses.replace(p, b=min(hi, t1) - p.start))
+                out.append(dataclasses.replace(p, b=min(p.b, t1 - p.start)))
             if hi > t2:
-                out.append(dataclasses.replace(p, start=p.start - gain, a=max(lo, t2) - p.start))
+                out.append(dataclasses.replace(p, start=p.start - gain, a=max(p.a, t2 - p.start)))
         out.append(Kept(seq, t1, 0.0, shortcut.duration))
         self.kept[seq] = kept
+        if kept.whole:
+            self.checked.setdefault(seq, []).append((0.0, shortcut.duration))
         self.parts = [p for p in out if p.b - p.a > TINY]
         self._reserve()
 
