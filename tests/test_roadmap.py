@@ -13,7 +13,8 @@ import pytest
 from oracle import Oracle
 from sandbox import forbid
 
-from planner.collision.segments import SegmentChecker, coarse_first, two_level, van_der_corput
+from planner.collision.schedule import coarse_first, two_level, van_der_corput
+from planner.collision.segments import SegmentChecker
 from planner.core.results import save_result
 from planner.model.environment import Obstacle
 from planner.model.geometry import pose

@@ -17,7 +17,8 @@ from typing import Protocol
 import numpy as np
 
 from planner.collision.checker import CollisionChecker, CollisionModel, pair_table
-from planner.collision.segments import FEW_PAIRS, Curve, SegmentChecker, geometry_radii, two_level
+from planner.collision.schedule import two_level
+from planner.collision.segments import FEW_PAIRS, Curve, SegmentChecker, geometry_radii
 from planner.core.errors import RegraspError
 from planner.core.results import frozen
 
