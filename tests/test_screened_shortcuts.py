@@ -151,7 +151,7 @@ class _Counted:
     def curve_checks(self, curve) -> int:
         return 100
 
-    def curve_valid(self, curve, ends=True, most=None, screen=False, spans=None) -> bool:
+    def curve_valid(self, curve, ends=True, screen=False, spans=None) -> bool:
         if screen:
             self.checks += 10
             return True

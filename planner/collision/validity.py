@@ -100,13 +100,10 @@ class Validity:
         """Every check of the straight segment passes (`ends=False`: both ends are known valid)."""
         return self.seg.segment_free(qa, qb, self.subset, ends)
 
-    def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None, screen: bool = False,
-                    spans: np.ndarray | None = None) -> bool:
+    def curve_valid(self, curve: Curve, ends: bool = True, screen: bool = False, spans: np.ndarray | None = None) -> bool:
         """Every check of a timed curve passes (see segments.py; `ends=False`: both ends are known valid; `screen`: its
         first checks, a screen that guarantees nothing; `spans`: after its screen passed, the rest of its checks that
-        bound these time spans); False, without a check, for a curve whose whole check could make more than `most`."""
-        if most is not None and self.curve_checks(curve) > most:
-            return False
+        bound these time spans)."""
         return self.seg.curve_first_hit(curve, self.subset, ends, screen, spans) is None
 
     def curve_checks(self, curve: Curve) -> int:
@@ -185,10 +182,9 @@ class Graded:
         return two_level(n, m, lambda s, coarse: not (self.coarse if coarse else self.fine).state_valid(qa + s * dq), ends,
                          between) is None
 
-    def curve_valid(self, curve: Curve, ends: bool = True, most: int | None = None, screen: bool = False,
-                    spans: np.ndarray | None = None) -> bool:
+    def curve_valid(self, curve: Curve, ends: bool = True, screen: bool = False, spans: np.ndarray | None = None) -> bool:
         """A timed curve checked at the fine paddings throughout (see Validity.curve_valid)."""
-        return self.fine.curve_valid(curve, ends, most, screen, spans)
+        return self.fine.curve_valid(curve, ends, screen, spans)
 
     def curve_checks(self, curve: Curve) -> int:
         return self.fine.curve_checks(curve)

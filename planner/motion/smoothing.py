@@ -183,7 +183,7 @@ class _Run:
         self.record, self.log = record, []  # the outcomes to replay; this smoothing's
         self.survivors = survivors
         self.spent = spent  # the checks made, by the run's smoothings before this one too
-        self.screens = 0  # the checks of this smoothing's screens, replayed ones included
+        self.screens = 0  # the checks of this smoothing's attempts (screens, or whole checks), replayed ones included
         self.eager = eager  # new shortcuts checked whole (a screen of this run has let a colliding one through)
         self.moves = np.array([np.ptp(p.path, axis=0) > 0 for p in pieces])  # the joints each piece moves
         robot = smoother.validities.robot
@@ -248,8 +248,8 @@ class _Run:
 
     @property
     def checks(self) -> int:
-        """What the passes count against the budget: this smoothing's screens (replayed ones too, so that a replay
-        follows the same course) and what the surviving shortcuts' checks could make."""
+        """What the passes count against the budget: this smoothing's attempts' checks (replayed ones too, so that a
+        replay follows the same course) and what the surviving shortcuts' checks could make."""
         return self.screens + self.survivors.reserved
 
     def attempt(self, t1: float, t2: float) -> bool:
