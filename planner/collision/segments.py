@@ -33,8 +33,9 @@ A screen of a curve (`screen=True`) makes only its first checks: its SCREEN_LEVE
 configurations, or as many of the van der Corput order), where nearly every curve that fails is found to fail. It
 guarantees nothing: a curve that passes it is checked for the rest later (`spans`), only where it is kept
 (smoothing.py): the configurations of its own checks that bound the spans kept (for a pair checked at every 2^j-th,
-from the last such configuration before a span to the first after it), less those of the screen. So a curve checked
-in parts never costs more checks than checked whole, and every span kept has the guarantee of the whole check.
+from the last such configuration before a span to the first after it), less those of the screen (a coarse-first
+check makes its coarse ones again: their answers decide where the fine ones go). So a curve checked in parts never
+costs more checks than checked whole, and every span kept has the guarantee of the whole check.
 """
 from __future__ import annotations
 
@@ -242,7 +243,7 @@ class SegmentChecker:
         q = curve.positions(np.interp(np.linspace(0.0, clock[-1], grid), clock, t))
         levels = None
         if grid == n and n >= 3:  # a row moves at most this share of the clock along it: each joint at its largest
-            live = rates > 0  # speed per unit of the clock over all pieces (a bound: per piece cost a product per piece)
+            live = rates > 0  # speed per unit of the clock over all pieces (a bound; the exact share costs a product per piece)
             peak = (bound[live][:, moving] / rates[live, None]).max(axis=0, initial=0.0)
             share = np.einsum("j,rj->r", peak, self.weights(subset)[:, moving])
             levels = self.pair_levels(subset, share * clock[-1], n)
