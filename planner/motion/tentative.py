@@ -75,19 +75,21 @@ class Survivors:
     def _reserve(self) -> None:
         self.reserved = sum(self.kept[seq].most for seq in self._unchecked())
 
+    def _open(self) -> list[Kept]:
+        """The surviving parts not yet checked."""
+        return [p for p in self.parts if not any(a <= p.a and p.b <= b for a, b in self.checked.get(p.seq, ()))]
+
     def _unchecked(self) -> list[int]:
         """The attempts, in order, with a surviving part not yet checked."""
-        done = self.checked
-        return sorted({p.seq for p in self.parts
-                       if not any(a <= p.a and p.b <= b for a, b in done.get(p.seq, ()))})
+        return sorted({p.seq for p in self._open()})
 
     def check(self) -> tuple[int | None, int]:
         """(the first attempt, in order, the rest of whose checks fail where its shortcut survives, else None; the
         checks made)."""
-        checks = 0
-        for seq in self._unchecked():
+        checks, open_parts = 0, self._open()
+        for seq in sorted({p.seq for p in open_parts}):
             kept = self.kept[seq]
-            spans = [(p.a, p.b) for p in self.parts if p.seq == seq]
+            spans = [(p.a, p.b) for p in open_parts if p.seq == seq]  # a part checked before is not checked again
             for v in kept.validities:
                 before = v.checks
                 valid = v.curve_valid(kept.shortcut, spans=np.array(spans))
