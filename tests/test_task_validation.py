@@ -377,6 +377,31 @@ def test_wide_starts_find_place_configurations_the_near_rest_ones_miss(default_s
     assert np.all(np.abs(spread / uniform - 1) < 0.3) and np.all(spread > 2 * GraspConfigParams().torso_sigma)
 
 
+def test_free_arm_and_torso_stay_near_where_the_task_holds_them(default_scene):
+    """The pick configurations keep the free arm and the torso near the robot's start configuration (the default
+    task's elbows are bent, the rest's straight), the place ones near its end; `free_around = "rest"` near the rest."""
+    from planner.collision.object_obstacle import ObjectCollision
+    from planner.grasping.grasp_list import GraspParams, grasp_list
+    from planner.handover.grasp_configs import GraspConfigParams, HandJob, hand_job
+
+    robot, scene = default_scene.robot, default_scene
+    collision = ObjectCollision(scene)
+    for role, arm, placed, task_q in (("pick", "right", scene.object_initial, scene.q_initial),
+                                    ("place", "left", scene.object_final, scene.q_final)):
+        grasps, _ = grasp_list(robot.spec, arm, scene.object_mesh, GraspParams(positions=30, orientations=30), 1)
+        free_arm = robot.arm_idx["left" if arm == "right" else "right"]
+        body = np.concatenate([robot.torso_idx, free_arm])
+        assert np.linalg.norm(task_q[body] - robot.q_rest[body]) > 1.0  # the two centres are far apart
+        for around, center in (("task", task_q), ("rest", robot.q_rest)):
+            p = GraspConfigParams(free_around=around, wide_attempts=0)
+            _, configs, _ = hand_job(HandJob(role, scene, collision, p, grasps, placed, robot.q_rest, np.random.default_rng(0)))
+            assert len(configs.q) >= 2
+            for q in configs.q:
+                assert not collision.in_collision(q, placed, (arm,))
+                # the free arm is never moved by IK: within 5 sigma of its centre, joint by joint
+                assert np.all(np.abs(q[free_arm] - center[free_arm]) <= 5 * p.free_arm_sigma + 1e-9), (role, around)
+
+
 def test_forced_arms_are_checked_before_the_reach_search(tmp_path, default_scene):
     from planner.core.errors import RegraspError
 

@@ -2,8 +2,9 @@
 
 Grasping arm: the cosine between the grasp's approach direction (palm origin towards the grasp
 centre) and the direction from the robot's base to the object: grasps coming from the far side
-score badly. Free arm: its joint distance to the rest configuration, its wrist's (the hand's mount
-frame's) height difference to rest and its wrist's distance to the plane through the torso and both shoulders, each divided by
+score badly. Free arm: its joint distance to a reference configuration (the robot's rest, or where
+the task holds the robot: see grasp_configs.py), its wrist's (the hand's mount frame's) height
+difference to the reference and its wrist's distance to the plane through the torso and both shoulders, each divided by
 a scale and mapped through exp(-sum) into (0, 1]. The score is arm_weight * (1 + cos) / 2 +
 free_weight * free score.
 """
@@ -22,7 +23,7 @@ from planner.model.robot import Robot, joint_at
 class ScoreWeights:
     arm_weight: float = 1.0
     free_weight: float = 1.0
-    joint_scale: float = 0.5  # rad of free-arm joint distance to rest worth one unit of penalty
+    joint_scale: float = 0.5  # rad of free-arm joint distance to the reference worth one unit of penalty
     length_scale: float = 0.1  # m of wrist height change or distance to the torso plane worth one unit
 
 
@@ -34,10 +35,12 @@ class ConfigScore:
 
 
 class ConfigScorer:
-    """Scores configurations of one robot; holds its own pinocchio Data (one per thread)."""
+    """Scores configurations of one robot against a reference configuration (its rest when None); holds its own
+    pinocchio Data (one per thread)."""
 
-    def __init__(self, robot: Robot, weights: ScoreWeights = ScoreWeights()):
+    def __init__(self, robot: Robot, weights: ScoreWeights = ScoreWeights(), reference: np.ndarray | None = None):
         self.robot, self.w = robot, weights
+        self.reference = robot.q_rest if reference is None else np.asarray(reference, dtype=float)
         self.data = robot.model.createData()
         model = robot.model
         self.palm = {a: robot.frame_id(robot.palm_frame(a)) for a in robot.spec.arm_names}
@@ -45,9 +48,9 @@ class ConfigScorer:
         self.shoulder = {a: joint_at(model, int(idx[0])) for a, idx in robot.arm_idx.items()}
         self.wrist = {a: robot.frame_id(robot.wrist_frame(a)) for a in robot.spec.arm_names}
         self.torso = joint_at(model, int(robot.torso_idx[0])) if len(robot.torso_idx) else 0
-        pin.forwardKinematics(model, self.data, robot.q_rest)
+        pin.forwardKinematics(model, self.data, self.reference)
         self.base = self.data.oMi[self.torso].translation.copy()
-        self.rest_wrist_z = {a: float(pin.updateFramePlacement(model, self.data, f).translation[2]) for a, f in self.wrist.items()}
+        self.reference_wrist_z = {a: float(pin.updateFramePlacement(model, self.data, f).translation[2]) for a, f in self.wrist.items()}
 
     def score(self, q: np.ndarray, arm: str, object_position: np.ndarray) -> ConfigScore:
         """The score of q with `arm` grasping an object whose centre of mass is at `object_position`."""
@@ -64,9 +67,9 @@ class ConfigScorer:
         """exp(-penalty) of a free arm at q (forward kinematics already done)."""
         robot, data, w = self.robot, self.data, self.w
         idx = robot.arm_idx[arm]
-        joints = float(np.linalg.norm(q[idx] - robot.q_rest[idx]))
+        joints = float(np.linalg.norm(q[idx] - self.reference[idx]))
         wrist = pin.updateFramePlacement(robot.model, data, self.wrist[arm]).translation
-        height = abs(float(wrist[2]) - self.rest_wrist_z[arm])
+        height = abs(float(wrist[2]) - self.reference_wrist_z[arm])
         shoulders = [data.oMi[j].translation for j in self.shoulder.values()]
         torso = data.oMi[self.torso].translation
         normal = np.cross(shoulders[0] - torso, shoulders[-1] - torso)

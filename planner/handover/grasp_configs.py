@@ -3,13 +3,16 @@
 Each hand's grasp list is first filtered against the environment at the object's placement (the
 picking hand at the initial pose, the placing hand at the final one): a hand that hits the support
 can never execute that grasp. For every remaining grasp, whole-robot configurations are sampled:
-the torso and the free arm near rest, the grasping arm (with the torso) by IK onto the grasp's palm
-pose, its fingers at the grasp; each is checked against self-collision, the environment and the
-object at its placement. A grasp for which none of these `attempts` succeeds gets `wide_attempts`
-more, the torso and the free arm drawn over their whole ranges (a placement at the edge of the
-workspace needs the spine bent or the other arm out of the way). The best-scored configuration of
-each grasp is kept (see config_score.py). Budgets: at most (attempts + wide_attempts) IK solves of
-ik_iterations iterations per grasp clear of the environment.
+the torso and the free arm near where the task holds them (the robot's start configuration for the
+pick, its end configuration for the place: a free arm sent to another pose only has to come back, and
+the roadmap holds those configurations; with `free_around = "rest"`, near the robot's rest, as in the
+paper), the grasping arm (with the torso) by IK onto the grasp's palm pose, its fingers at the grasp;
+each is checked against self-collision, the environment and the object at its placement. A grasp for
+which none of these `attempts` succeeds gets `wide_attempts` more, the torso and the free arm drawn
+over their whole ranges (a placement at the edge of the workspace needs the spine bent or the other
+arm out of the way). The best-scored configuration of each grasp is kept (see config_score.py).
+Budgets: at most (attempts + wide_attempts) IK solves of ik_iterations iterations per grasp clear of
+the environment.
 """
 from __future__ import annotations
 
@@ -19,7 +22,7 @@ import numpy as np
 
 from planner.collision.hand_placement import ObstacleTest, environment_filter
 from planner.collision.object_obstacle import ObjectCollision
-from planner.core.bounds import bounded
+from planner.core.bounds import bounded, described
 from planner.core.forked import forked_map
 from planner.core.results import array
 from planner.core.stages import StageLog
@@ -34,13 +37,15 @@ from planner.model.task import Scene
 
 @dataclass(frozen=True)
 class GraspConfigParams:
-    attempts: int = bounded(8, 1, 1000, "IK starts", "IK starts per grasp, torso and free arm near rest")
+    attempts: int = bounded(8, 1, 1000, "IK starts", "IK starts per grasp, torso and free arm near their center (free_around)")
     wide_attempts: int = bounded(
         16, 0, 1000, "IK starts", "more IK starts, torso and free arm over their whole ranges, for a grasp the first ones miss")
     keep: int = bounded(
         2, 1, 100, "configurations", "a grasp stops after this many collision-free configurations; its best-scored one is kept")
-    torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the torso joints sampled around rest")
-    free_arm_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the free arm's joints sampled around rest")
+    free_around: str = described("task", "center of the torso and the free arm, sampled and scored around it: the robot's "
+                                 "start (pick) or end (place) configuration, or its rest (the paper)", ("task", "rest"))
+    torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the torso joints around their center (free_around)")
+    free_arm_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the free arm's joints around their center (free_around)")
     position_tolerance: float = bounded(0.002, 1e-5, 0.05, "m", "palm position to its grasp pose, at most")
     rotation_tolerance: float = bounded(0.02, 1e-4, 0.5, "rad", "palm orientation to its grasp pose, at most")
     workers: int = bounded(2, 1, 64, "processes", "worker processes (the two hands are searched in parallel)")
@@ -49,13 +54,18 @@ class GraspConfigParams:
     arm_weight: float = bounded(
         1.0, 0.0, 100.0, "(weight)", "configuration score weight of the grasping arm (its approach towards the robot's base)")
     free_weight: float = bounded(
-        1.0, 0.0, 100.0, "(weight)", "configuration score weight of the free arm (near rest, wrist at its rest height, by the torso)")
-    joint_scale: float = bounded(0.5, 0.01, 10.0, "rad", "free-arm joint distance to rest worth one unit of penalty")
+        1.0, 0.0, 100.0, "(weight)", "configuration score weight of the free arm (near its center, wrist at that height, by the torso)")
+    joint_scale: float = bounded(0.5, 0.01, 10.0, "rad", "free-arm joint distance to its center worth one unit of penalty")
     length_scale: float = bounded(
         0.1, 0.001, 10.0, "m", "free-arm wrist height change or distance to the torso plane worth one unit of penalty")
 
     def weights(self) -> ScoreWeights:
         return ScoreWeights(self.arm_weight, self.free_weight, self.joint_scale, self.length_scale)
+
+    def center(self, robot: Robot, task_q: np.ndarray) -> np.ndarray:
+        """The configuration whose torso and free arms are sampled and scored around: `task_q` (where the task holds
+        the robot when it grasps) or the robot's rest."""
+        return task_q if self.free_around == "task" else robot.q_rest
 
 
 @dataclass(frozen=True)
@@ -103,20 +113,23 @@ class GraspConfigs:
 
 
 class ConfigSampler:
-    """Whole-robot configurations putting one or two hands at grasp poses, checked with the object in place."""
+    """Whole-robot configurations putting one or two hands at grasp poses, checked with the object in place; the torso
+    and the free arms sampled around `center` (the robot's rest when None)."""
 
-    def __init__(self, robot: Robot, collision: ObjectCollision, scorer: ConfigScorer, p: GraspConfigParams):
+    def __init__(self, robot: Robot, collision: ObjectCollision, scorer: ConfigScorer, p: GraspConfigParams,
+                 center: np.ndarray | None = None):
         self.robot, self.collision, self.scorer, self.p = robot, collision, scorer, p
+        self.center = robot.q_rest if center is None else np.asarray(center, dtype=float)
         self.ik = {a: ArmIK(robot, a) for a in robot.spec.arm_names}
         self.both = ArmIK(robot, tuple(robot.spec.arm_names))
 
     def body(self, rng: np.random.Generator, free_arms: list[str], wide: bool = False) -> np.ndarray:
-        """q_rest with the torso and the free arms sampled around rest (Gaussian, clipped to the limits), or
+        """The center with the torso and the free arms sampled around it (Gaussian, clipped to the limits), or
         uniformly over their ranges when `wide`."""
-        robot, p = self.robot, self.p
-        q = robot.q_rest.copy()
+        robot, p, center = self.robot, self.p, self.center
+        q = center.copy()
         for idx, sigma in [(robot.torso_idx, p.torso_sigma)] + [(robot.arm_idx[a], p.free_arm_sigma) for a in free_arms]:
-            q[idx] = rng.uniform(robot.lower[idx], robot.upper[idx]) if wide else robot.q_rest[idx] + rng.normal(0.0, sigma, len(idx))
+            q[idx] = rng.uniform(robot.lower[idx], robot.upper[idx]) if wide else center[idx] + rng.normal(0.0, sigma, len(idx))
         return robot.clip(q)
 
     def reach(self, hands: dict[str, tuple[np.ndarray, np.ndarray]], q: np.ndarray) -> np.ndarray | None:
@@ -199,7 +212,8 @@ def hand_job(job: HandJob) -> tuple[np.ndarray, HandConfigs, StageLog]:
     obstacles = ObstacleTest.of_environment(scene.environment, collision.model.params.env_padding)
     free = environment_filter(scene.robot, grasps, job.object_pose, obstacles)
     log.done(f"{job.role} grasps clear of the environment", free.sum(), f"of {len(grasps)} at the {placement} pose")
-    sampler = ConfigSampler(scene.robot, collision, ConfigScorer(scene.robot, job.params.weights()), job.params)
+    center = job.params.center(scene.robot, scene.q_initial if job.role == "pick" else scene.q_final)
+    sampler = ConfigSampler(scene.robot, collision, ConfigScorer(scene.robot, job.params.weights(), center), job.params, center)
     configs = hand_configurations(sampler, grasps, np.flatnonzero(free), job.object_pose, job.start, job.rng)
     log.done(f"{job.role} grasp configurations", len(configs.rank), f"collision-free, object at the {placement} pose")
     return free, configs, log
