@@ -890,3 +890,36 @@ def _hull_pockets(mesh, clearance: float, rng: np.random.Generator) -> np.ndarra
     keep = np.flatnonzero(inside_hull & (gap > clearance + 0.002))  # the sampled points lie about a millimetre apart
     keep = [k for k in keep if _crossings(points[k], np.array([0.36, 0.48, 0.8]), mesh.triangles) % 2 == 0]
     return points[sorted(keep, key=lambda k: -gap[k])]
+
+
+def test_situations_made_alike_share_one_collision_model(example):
+    """Each candidate lift makes its own Situation: alike ones (holder, pose, touching, support) share one model and
+    one collision data, each of which costs milliseconds to make; a fingertip allowed to touch makes another, without
+    that fingertip's pairs with the object, and the shared checker answers as a checker of its own does."""
+    from planner.collision.checker import CollisionChecker
+    from planner.collision.situation import Situation, fingertip_geometries
+    from planner.motion.transit_stage import transit_joints
+
+    scene, roadmap, _ = example
+    robot = scene.robot
+    validities = _phase_planner(scene, roadmap).validities
+    q, idx = scene.q_initial, transit_joints(robot)
+    first = validities.of(Situation(None, scene.object_initial), q, idx)
+    again = validities.of(Situation(None, scene.object_initial.copy()), q, idx)
+    assert again is first and again.checker is first.checker
+    finger = robot.spec.arm("right").hand.fingers[0].name
+    tips = fingertip_geometries(validities.cm, "right", [finger])
+    touching = validities.of(Situation(None, scene.object_initial, tips), q, idx)
+    assert touching.checker is not first.checker and touching.model.geometry is not first.model.geometry
+
+    def names(model, subset):
+        objs, pairs = model.geometry.geometryObjects, model.geometry.collisionPairs
+        return {(objs[pairs[int(k)].first].name, objs[pairs[int(k)].second].name) for k in model.subsets[subset]}
+
+    assert not any(tip in pair for tip in tips for pair in names(touching.model, "object"))
+    assert any(tip in pair for tip in tips for pair in names(first.model, "object"))
+    rng = np.random.default_rng(3)
+    own = CollisionChecker(first.model)
+    for _ in range(30):
+        x = robot.clip(q + rng.normal(0.0, 0.4, robot.nq))
+        assert first.checker.in_collision(x, "moving") == own.in_collision(x, "moving")

@@ -43,6 +43,12 @@ class Situation:
         return self.pose if self.holder is None else palm @ self._grasp_inverse
 
     @functools.cached_property
+    def key(self) -> tuple:
+        """What the situation is, as a hashable value (a situation compares by identity): situations made alike, as
+        each candidate lift makes its own, share one collision model and one collision data."""
+        return self.holder, np.asarray(self.pose, dtype=float).tobytes(), self.touching, self.support
+
+    @functools.cached_property
     def _grasp_inverse(self) -> np.ndarray:
         """pose⁻¹, inverted once: a carried object is posed at every sample of the trajectory."""
         return np.linalg.inv(self.pose)

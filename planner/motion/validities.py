@@ -109,8 +109,8 @@ class Validities:
         self.data: pin.Data = self.robot.model.createData()
         self.open = self.robot.q_rest
         self._robot_radii = geometry_radii(cm)
-        self._bases: dict[Situation, CollisionModel] = {}
-        self._checkers: dict[Situation, CollisionChecker] = {}
+        self._bases: dict[tuple, CollisionModel] = {}  # per Situation.key
+        self._checkers: dict[tuple, CollisionChecker] = {}
         self._motions: dict[tuple, MotionChecks] = {}
         self._object_radii: dict[tuple[int, bytes], np.ndarray] = {}
 
@@ -119,14 +119,14 @@ class Validities:
         open values at q are those whose pairs 'changed' (see for_motion)."""
         robot = self.robot
         moved = tuple(a for a in robot.spec.arm_names if not np.allclose(q[robot.hand_idx[a]], self.open[robot.hand_idx[a]]))
-        key = (situation, moved, np.asarray(moving).tobytes())
+        key = (situation.key, moved, np.asarray(moving).tobytes())
         if key not in self._motions:
-            if situation not in self._bases:
-                self._bases[situation] = situation_base(self.cm, self.shape, situation, self.hull)
-            model = for_motion(self._bases[situation], moved, moving)
-            if situation not in self._checkers:
-                self._checkers[situation] = CollisionChecker(model, self.data)
-            self._motions[key] = MotionChecks(model, self._checkers[situation], self.radii, self.transit)
+            if situation.key not in self._bases:
+                self._bases[situation.key] = situation_base(self.cm, self.shape, situation, self.hull)
+            model = for_motion(self._bases[situation.key], moved, moving)
+            if situation.key not in self._checkers:
+                self._checkers[situation.key] = CollisionChecker(model, self.data)
+            self._motions[key] = MotionChecks(model, self._checkers[situation.key], self.radii, self.transit)
         return self._motions[key]
 
     def radii(self, model: CollisionModel) -> np.ndarray:
