@@ -168,6 +168,31 @@ def test_shortcuts_longer_than_the_limit_are_never_checked():
     assert len(shortcut_vertices(zigzag, rule, rule, 0.05)) == 2 and max(rule.lengths()) > 3.0
 
 
+def test_a_detour_made_online_is_cut_however_long():
+    """The length limit keeps roadmap edges only: a jump that would replace part of a detour RRTConnect made (checked
+    over every pair, as the jump would be) is tried whatever its length; the random pass keeps each piece's flag as it
+    splices."""
+    from planner.motion.transit import kept_detours, shortcut_vertices
+
+    zigzag = np.array([[0.0, 0.0], [0.6, 0.6], [1.2, 0.0], [1.8, 0.6], [2.4, 0.0], [3.0, 0.6]])
+    roadmap = np.zeros(5, dtype=bool)
+    rule = Counting()
+    assert len(shortcut_vertices(zigzag, rule, rule, 0.05, 1.0, roadmap)) == 6 and max(rule.lengths(), default=0.0) <= 1.0
+    detour = roadmap.copy()
+    detour[2] = True  # the middle segment came from a reconnection
+    rule = Counting()
+    out = shortcut_vertices(zigzag, rule, rule, 0.05, 1.0, detour)
+    assert len(out) == 2 and max(rule.lengths()) > 3.0
+    flags = kept_detours(zigzag, detour, zigzag[[0, 1, 2, 3, 5]])
+    assert flags.tolist() == [False, False, True, False]  # the jump 3 -> 5 is new; the others are the path's own
+    rule = Counting()
+    shortcut(zigzag, rule, rule, np.random.default_rng(0), 200, 0.05, 1.0, detour)
+    assert max(rule.lengths()) > 1.0  # some random shortcut over the detour is longer than the limit
+    rule = Counting()
+    shortcut(zigzag, rule, rule, np.random.default_rng(0), 200, 0.05, 1.0, roadmap)
+    assert max(rule.lengths()) <= 1.0
+
+
 def _phase_planner(scene, roadmap, baseline: bool = False):
     """The planner of a double grasp on a scene and the roadmap, with the default parameters and seed 0."""
     from planner.collision.checker import build_collision_model

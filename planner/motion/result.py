@@ -44,7 +44,8 @@ class MotionParams:
     rrt_step: float = bounded(0.5, 0.01, 10.0, "rad", "RRTConnect's range (longest extension, joint-space distance)")
     shortcut_attempts: int = bounded(30, 0, 10000, "shortcuts", "random straight shortcuts per transit, after the greedy ones")
     shortcut_min_gain: float = bounded(0.1, 0.0, 10.0, "rad", "a straight shortcut shortening the path by less is not checked")
-    graph_shortcut_length: float = bounded(3.0, 0.0, 100.0, "rad", "roadmap: a graph path's shortcuts longer than this are not tried")
+    graph_shortcut_length: float = bounded(3.0, 0.0, 100.0, "rad",
+                                           "roadmap: a graph path's shortcuts longer than this are not tried (but over an RRT detour)")
     smooth_attempts: int = bounded(1000, 0, 1000000, "shortcuts", "random parabolic shortcuts drawn for the whole motion (runs share them)")
     smooth_checks: int = bounded(24000, 0, 100000000, "collision checks", "all the smoothing may make (shared by its runs)")
     smooth_min_gain: float = bounded(0.02, 0.0, 10.0, "s", "a parabolic shortcut saving less time is not checked")

@@ -101,6 +101,8 @@ class LazyTransit:
         self.ends: tuple[int, ...] = ()
         self.alone: set[int] = set()  # the ends no graph node joins
         self.status = PhaseStatus(graph)
+        self.reconnected: set[int] = set()  # the edges RRTConnect made
+        self.detours = np.zeros(0, dtype=bool)  # per segment of the path `query` returned: one of those edges
 
     def _config(self, node: int) -> np.ndarray:
         """A graph node as a configuration of this phase (its hands as the phase holds them)."""
@@ -192,6 +194,7 @@ class LazyTransit:
         t0 = time.perf_counter()
         if self.near.motion_valid(q_start, q_goal, ends=False):
             stats.seconds_planning += time.perf_counter() - t0
+            self.detours = np.zeros(1, dtype=bool)
             return np.stack([q_start, q_goal])
         start, goal = (int(n) for n in self.graph.add_nodes(np.stack([q_start, q_goal])))
         self.ends = (start, goal)
@@ -218,6 +221,8 @@ class LazyTransit:
                 span = self._invalid_span(path)
                 stats.seconds_validating += time.perf_counter() - t
                 if span is None:
+                    made = [self.graph.edge_id(u, v) in self.reconnected for u, v in zip(path[:-1], path[1:])]
+                    self.detours = np.array(made, dtype=bool)
                     return np.array([self._config(n) for n in path])
                 last = (path, span)
                 if searches < self.p.max_searches:
@@ -246,6 +251,7 @@ class LazyTransit:
                 self.status.node[ids] = VALID
                 for u, v in zip(chain[:-1], chain[1:]):
                     self.status.edge[self.graph.edge_id(u, v)] = VALID
+                    self.reconnected.add(self.graph.edge_id(u, v))
                 stats.nodes_validating += len(ids)
                 weights = self._weights()
             last = None
@@ -269,16 +275,18 @@ def rrt_transit(space: JointSpace, full: MotionValidity, near: MotionValidity, q
 
 
 def shortcut_vertices(path: np.ndarray, full: MotionValidity, near: MotionValidity, min_gain: float = 0.0,
-                      max_length: float = np.inf) -> np.ndarray:
+                      max_length: float = np.inf, detours: np.ndarray | None = None) -> np.ndarray:
     """Greedy shortcuts between vertices: from the first vertex, a straight motion to the farthest later vertex it can
     reach validly (checked with `near` from the first or to the last vertex: close to the ends), then on from there. Each
     motion kept is checked once (random shortcuts check many that a later one replaces) and the path keeps few vertices,
     each a stop of the rest-to-rest timing. A jump that would shorten the path by less than `min_gain` is taken along the
     path itself, unchecked (the gain only grows with the vertex jumped to: no nearer one gains more); one longer than
-    `max_length` is not tried (a path of roadmap edges, checked offline, keeps them rather than pay every pair's checks
-    along a long new motion)."""
+    `max_length` is not tried unless it replaces a detour RRTConnect made (`detours`, a flag per segment; None: none): a
+    path of roadmap edges, checked offline, keeps them rather than pay every pair's checks along a long new motion, but
+    a reconnection's detour, checked over every pair as the jump would be, is cut however long."""
     path = np.asarray(path, dtype=float)
     n = len(path)
+    flags = np.zeros(n - 1, dtype=bool) if detours is None else np.asarray(detours, dtype=bool)
     cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
     out, i = [path[0]], 0
     while i < n - 1:
@@ -288,7 +296,8 @@ def shortcut_vertices(path: np.ndarray, full: MotionValidity, near: MotionValidi
             if cum[j] - cum[i] - straight < min_gain:
                 out.extend(path[i + 1: j])  # nearly straight already
                 break
-            if straight <= max_length and (near if i == 0 or j == n - 1 else full).motion_valid(path[i], path[j]):
+            if ((straight <= max_length or flags[i:j].any())
+                    and (near if i == 0 or j == n - 1 else full).motion_valid(path[i], path[j])):
                 break
             j -= 1
         out.append(path[j])
@@ -297,14 +306,16 @@ def shortcut_vertices(path: np.ndarray, full: MotionValidity, near: MotionValidi
 
 
 def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: np.random.Generator, attempts: int,
-             min_gain: float = 0.0, max_length: float = np.inf) -> np.ndarray:
+             min_gain: float = 0.0, max_length: float = np.inf, detours: np.ndarray | None = None) -> np.ndarray:
     """Random shortcuts between two points of the polyline (by arc length), kept when the two points and the straight
     motion between them are valid (checked with `near` when it leaves the first segment or reaches the last: close to
     the ends). The points are checked too: one inside a checked segment keeps the clearance, not the padding that a
     motion check needs at both ends for its guarantee. A shortcut that would shorten the path by less than `min_gain`
     (joint-space length) is not checked: a valid one costs every check of its segment, and once the path is nearly
-    straight most would gain nothing. One longer than `max_length` is not checked either (see shortcut_vertices)."""
+    straight most would gain nothing. One longer than `max_length` is not checked either, unless it replaces part of a
+    detour (`detours`: see shortcut_vertices)."""
     path = np.array(path, dtype=float)
+    flags = np.zeros(max(len(path) - 1, 0), dtype=bool) if detours is None else np.asarray(detours, dtype=bool)
     for _ in range(attempts):
         if len(path) < 3:
             break
@@ -316,11 +327,19 @@ def shortcut(path: np.ndarray, full: MotionValidity, near: MotionValidity, rng: 
             continue
         a = path[i] + (s1 - cum[i]) / max(seg[i], 1e-12) * (path[i + 1] - path[i])
         b = path[j] + (s2 - cum[j]) / max(seg[j], 1e-12) * (path[j + 1] - path[j])
-        if s2 - s1 - float(np.linalg.norm(b - a)) < min_gain or float(np.linalg.norm(b - a)) > max_length:
+        if s2 - s1 - float(np.linalg.norm(b - a)) < min_gain or (float(np.linalg.norm(b - a)) > max_length and not flags[i: j + 1].any()):
             continue
         if (near if i == 0 or j == len(seg) - 1 else full).motion_valid(a, b):
             path = np.concatenate([path[: i + 1], [a, b], path[j + 1:]])
+            flags = np.concatenate([flags[: i + 1], [False], flags[j:]])  # the pieces of segments i and j keep theirs
     return _drop_duplicates(path)
+
+
+def kept_detours(path: np.ndarray, detours: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Per segment of `out` (vertices of `path` after shortcut_vertices): whether it is one of `path`'s detour segments
+    (`detours`, a flag per segment of `path`); a jump the shortcuts made is not."""
+    edges = {(a.tobytes(), b.tobytes()) for a, b, f in zip(path[:-1], path[1:], detours) if f}
+    return np.array([(a.tobytes(), b.tobytes()) in edges for a, b in zip(out[:-1], out[1:])], dtype=bool)
 
 
 def _drop_duplicates(path: np.ndarray) -> np.ndarray:

@@ -20,7 +20,16 @@ from planner.motion.phase import Phase
 from planner.motion.piece import TRANSIT_PARTS, Piece, PieceFailed, pairs_text
 from planner.motion.result import MotionParams
 from planner.motion.space import JointSpace
-from planner.motion.transit import LazyTransit, TransitFailed, TransitParams, TransitStats, rrt_transit, shortcut, shortcut_vertices
+from planner.motion.transit import (
+    LazyTransit,
+    TransitFailed,
+    TransitParams,
+    TransitStats,
+    kept_detours,
+    rrt_transit,
+    shortcut,
+    shortcut_vertices,
+)
 from planner.motion.validities import Validities
 
 
@@ -78,13 +87,20 @@ class TransitStage:
             else:  # a phase's queries share its RRT budget: once spent, they search the graph only
                 left = max(0, self.p.phase_reconnections - stats.rrt_calls)
                 params = dataclasses.replace(tp, max_reconnections=min(left, tp.max_reconnections))
-                path = LazyTransit(self.graph, space, full.on("changed"), full, near, params, self.rng, stats).query(q_start, q_goal)
+                query = LazyTransit(self.graph, space, full.on("changed"), full, near, params, self.rng, stats)
+                path = query.query(q_start, q_goal)
+                detours = query.detours
         except TransitFailed as exc:
             raise PieceFailed(phase, part, str(exc)) from exc
         t = time.perf_counter()
         gain = tp.shortcut_min_gain
-        longest = np.inf if self.baseline or arm is not None else tp.graph_shortcut_length  # a graph path: see shortcut_vertices
-        path = shortcut(shortcut_vertices(path, full, near, gain, longest), full, near, self.rng, tp.shortcut_attempts, gain, longest)
+        if self.baseline or arm is not None:
+            greedy = shortcut_vertices(path, full, near, gain)
+            path = shortcut(greedy, full, near, self.rng, tp.shortcut_attempts, gain)
+        else:  # a graph path keeps its roadmap edges rather than pay long new motions, not its detours: see shortcut_vertices
+            longest = tp.graph_shortcut_length
+            greedy = shortcut_vertices(path, full, near, gain, longest, detours)
+            path = shortcut(greedy, full, near, self.rng, tp.shortcut_attempts, gain, longest, kept_detours(path, detours, greedy))
         stats.seconds_shortcut += time.perf_counter() - t
         return Piece(phase, part, path, situation)
 
