@@ -114,12 +114,11 @@ class GraspConfigs:
 
 class ConfigSampler:
     """Whole-robot configurations putting one or two hands at grasp poses, checked with the object in place; the torso
-    and the free arms sampled around `center` (the robot's rest when None)."""
+    and the free arms sampled around the configuration the scorer scores them against (the robot's rest without one)."""
 
-    def __init__(self, robot: Robot, collision: ObjectCollision, scorer: ConfigScorer, p: GraspConfigParams,
-                 center: np.ndarray | None = None):
+    def __init__(self, robot: Robot, collision: ObjectCollision, scorer: ConfigScorer | None, p: GraspConfigParams):
         self.robot, self.collision, self.scorer, self.p = robot, collision, scorer, p
-        self.center = robot.q_rest if center is None else np.asarray(center, dtype=float)
+        self.center = robot.q_rest if scorer is None else scorer.reference
         self.ik = {a: ArmIK(robot, a) for a in robot.spec.arm_names}
         self.both = ArmIK(robot, tuple(robot.spec.arm_names))
 
@@ -213,7 +212,7 @@ def hand_job(job: HandJob) -> tuple[np.ndarray, HandConfigs, StageLog]:
     free = environment_filter(scene.robot, grasps, job.object_pose, obstacles)
     log.done(f"{job.role} grasps clear of the environment", free.sum(), f"of {len(grasps)} at the {placement} pose")
     center = job.params.center(scene.robot, scene.q_initial if job.role == "pick" else scene.q_final)
-    sampler = ConfigSampler(scene.robot, collision, ConfigScorer(scene.robot, job.params.weights(), center), job.params, center)
+    sampler = ConfigSampler(scene.robot, collision, ConfigScorer(scene.robot, job.params.weights(), center), job.params)
     configs = hand_configurations(sampler, grasps, np.flatnonzero(free), job.object_pose, job.start, job.rng)
     log.done(f"{job.role} grasp configurations", len(configs.rank), f"collision-free, object at the {placement} pose")
     return free, configs, log

@@ -78,6 +78,7 @@ class TransitStage:
                 raise PieceFailed(phase, part, f"its {name} configuration collides ({pairs_text(near.first_collision(q[None]))})")
         if near.seg is not full.seg:  # dense only beside what the ends hold close
             near = Graded(full, near)
+        detours = None  # a graph path's segments RRTConnect made (see shortcut_vertices)
         try:
             if arm is not None:
                 path = rrt_transit(space, full, near, q_start, q_goal, dataclasses.replace(tp, rrt_motions=tp.reconnect_motions),
@@ -94,13 +95,10 @@ class TransitStage:
             raise PieceFailed(phase, part, str(exc)) from exc
         t = time.perf_counter()
         gain = tp.shortcut_min_gain
-        if self.baseline or arm is not None:
-            greedy = shortcut_vertices(path, full, near, gain)
-            path = shortcut(greedy, full, near, self.rng, tp.shortcut_attempts, gain)
-        else:  # a graph path keeps its roadmap edges rather than pay long new motions, not its detours: see shortcut_vertices
-            longest = tp.graph_shortcut_length
-            greedy = shortcut_vertices(path, full, near, gain, longest, detours)
-            path = shortcut(greedy, full, near, self.rng, tp.shortcut_attempts, gain, longest, kept_detours(path, detours, greedy))
+        longest = np.inf if detours is None else tp.graph_shortcut_length  # a graph path: see shortcut_vertices
+        greedy = shortcut_vertices(path, full, near, gain, longest, detours)
+        kept = None if detours is None else kept_detours(path, detours, greedy)
+        path = shortcut(greedy, full, near, self.rng, tp.shortcut_attempts, gain, longest, kept)
         stats.seconds_shortcut += time.perf_counter() - t
         return Piece(phase, part, path, situation)
 

@@ -119,14 +119,15 @@ class Validities:
         open values at q are those whose pairs 'changed' (see for_motion)."""
         robot = self.robot
         moved = tuple(a for a in robot.spec.arm_names if not np.allclose(q[robot.hand_idx[a]], self.open[robot.hand_idx[a]]))
-        key = (situation.key, moved, np.asarray(moving).tobytes())
+        alike = situation.key
+        key = (alike, moved, np.asarray(moving).tobytes())
         if key not in self._motions:
-            if situation.key not in self._bases:
-                self._bases[situation.key] = situation_base(self.cm, self.shape, situation, self.hull)
-            model = for_motion(self._bases[situation.key], moved, moving)
-            if situation.key not in self._checkers:
-                self._checkers[situation.key] = CollisionChecker(model, self.data)
-            self._motions[key] = MotionChecks(model, self._checkers[situation.key], self.radii, self.transit)
+            if alike not in self._bases:
+                self._bases[alike] = situation_base(self.cm, self.shape, situation, self.hull)
+            model = for_motion(self._bases[alike], moved, moving)
+            if alike not in self._checkers:
+                self._checkers[alike] = CollisionChecker(model, self.data)
+            self._motions[key] = MotionChecks(model, self._checkers[alike], self.radii, self.transit)
         return self._motions[key]
 
     def radii(self, model: CollisionModel) -> np.ndarray:

@@ -63,8 +63,7 @@ class TaskGraph:
         self.limits, self.allowed = limits, set(allowed)
         quick = dataclasses.replace(params, wide_attempts=0, keep=1)
         center = quick.center(scene.robot, scene.q_initial)  # the free arm as the task starts, like the pick's
-        self.sampler = ConfigSampler(scene.robot, ObjectCollision(scene), ConfigScorer(scene.robot, quick.weights(), center), quick,
-                                     center)
+        self.sampler = ConfigSampler(scene.robot, ObjectCollision(scene), ConfigScorer(scene.robot, quick.weights(), center), quick)
         self.take = REGRASP if self.a == self.b else TABLE  # what taking the object at an intermediate placement is
         both = np.zeros(0, int)
         if placements is not None and len(placements):  # none given: the handover alone
