@@ -705,9 +705,13 @@ def test_the_clearance_meter_measures_a_configuration_the_same_whatever_it_measu
 def test_transit_checks_and_pair_tests_count_every_check_of_the_transit(example, monkeypatch, baseline):
     """Table I's transit checks are every collision check a transit makes, counted apart from the planner's own tally:
     each call of the collision checker while the transit runs; its pair tests, pinocchio's count of the pairs each
-    check's broad phase passed to the exact test, and each pair tested alone (a screened mesh). The example's Rest
-    transit, from where the placing hand retreated (near the object: some pairs checked densely) to the final
-    configuration."""
+    check's broad phase passed to the exact test, and each pair tested alone (a screened mesh), those of RRTConnect and
+    of the shortcuts apart. The example's Rest transit, from where the placing hand retreated (near the object: some
+    pairs checked densely) to the final configuration."""
+    from collections import Counter
+
+    import planner.motion.transit as transit_module
+    import planner.motion.transit_stage as stage_module
     from planner.collision.checker import CollisionChecker
     from planner.collision.situation import Situation
     from planner.core.session import Session
@@ -728,17 +732,44 @@ def test_transit_checks_and_pair_tests_count_every_check_of_the_transit(example,
     monkeypatch.setattr(CollisionChecker, "in_collision", lambda self, *a, **k: calls.append(1) or check(self, *a, **k))
     collide = pin.computeCollisions
 
+    part, by_part = ["graph"], Counter()
+
     def counted(*args):  # pinocchio's own count of the pairs its callback sent to the exact test
         hit = collide(*args)
-        tested.extend(a.count for a in args if isinstance(a, pin.CollisionCallBackDefault))
+        n = sum(a.count for a in args if isinstance(a, pin.CollisionCallBackDefault))
+        tested.append(n)
+        by_part[part[-1]] += n
         return hit
+
+    def one(*args):  # one pair, tested exactly
+        tested.append(1)
+        by_part[part[-1]] += 1
+        return alone(*args)
+
+    def labelled(module, name: str, label: str) -> None:
+        function = getattr(module, name)
+
+        def run(*args, **kwargs):
+            part.append(label)
+            try:
+                return function(*args, **kwargs)
+            finally:
+                part.pop()
+
+        monkeypatch.setattr(module, name, run)
 
     monkeypatch.setattr(pin, "computeCollisions", counted)
     alone = pin.computeCollision
-    monkeypatch.setattr(pin, "computeCollision", lambda *args: tested.append(1) or alone(*args))  # one pair, tested exactly
+    monkeypatch.setattr(pin, "computeCollision", one)
+    labelled(transit_module, "_rrt", "rrt")
+    for name in ("shortcut_vertices", "shortcut"):
+        labelled(stage_module, name, "shortcut")
     planner.stage(Phase.REST).transit(start, goal, Situation(None, scene.object_final))
-    assert planner.stats[Phase.REST].checks == len(calls) > 2, (planner.stats[Phase.REST].checks, len(calls))
-    assert planner.stats[Phase.REST].pair_tests == sum(tested) >= len(calls) / 2, (planner.stats[Phase.REST].pair_tests, sum(tested))
+    stats = planner.stats[Phase.REST]
+    assert stats.checks == len(calls) > 2, (stats.checks, len(calls))
+    assert stats.pair_tests == sum(tested) >= len(calls) / 2, (stats.pair_tests, sum(tested))
+    assert (stats.pairs_rrt, stats.pairs_shortcut) == (by_part["rrt"], by_part["shortcut"]), by_part
+    assert by_part["shortcut"] > 0 and (by_part["rrt"] > 0) == baseline  # ours' Rest follows the graph, no reconnection
 
 
 def test_the_carry_transit_can_use_the_roadmap_nodes(example):

@@ -96,7 +96,7 @@ def test_the_transits_of_a_sequence_given_up_are_counted():
     """The first double grasp is planned by a hurried planner, whose Rest transit fails: the sequence is given up and
     the next moves. The work of the one given up is not lost from the figures: the stage 'transits of the sequences
     given up' holds its planner's transit checks and pair tests, and the bench adds them to the run's."""
-    from planner.cli.bench import _given_up
+    from planner.cli.bench_motion import _given_up
     from planner.motion.strategies import GIVEN_UP
 
     attempt, hurried = _given_up_first(HURRIED)
@@ -114,7 +114,7 @@ def test_a_sequence_given_up_before_its_transits_adds_no_stage():
     """The first double grasp's contact motions fail (obstacles kept 5 cm away: the hand cannot reach the object), so no
     transit of it ran: no stage counts its transits, and no stage of the motion counts 0 (a suite names the first stage
     that kept nothing as where a failed step stopped)."""
-    from planner.cli.bench import _given_up
+    from planner.cli.bench_motion import _given_up
     from planner.motion.strategies import GIVEN_UP
 
     attempt, padded = _given_up_first(MotionParams(contact_env_padding=0.05, contact_env_clearance=0.04))

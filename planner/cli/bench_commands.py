@@ -1,5 +1,5 @@
-"""`regrasp bench collision`, `bench double-grasps`, `bench motion` and `bench grasps`: the benchmarks of planner/cli/bench.py
-and planner/cli/bench_grasps.py with their options, printed as tables (and written as JSON with --json)."""
+"""`regrasp bench collision`, `bench double-grasps`, `bench motion` and `bench grasps`: the benchmarks of planner/cli/bench.py,
+bench_motion.py and bench_grasps.py with their options, printed as tables (and written as JSON with --json)."""
 from __future__ import annotations
 
 import argparse
@@ -51,7 +51,7 @@ def _cmd_bench_double_grasps(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_motion(args: argparse.Namespace) -> int:
-    from planner.cli.bench import bench_motion
+    from planner.cli.bench_motion import bench_motion
     from planner.cli.plan import step_params
 
     params = step_params(args.set or [])  # a bad --set fails here, before any step runs

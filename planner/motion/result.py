@@ -91,7 +91,8 @@ the names of q's columns;
     double_grasp: int  # rank of the double grasp used (-1 when none worked)
     tried: list  # per double grasp tried, best first: '' if used, else why it failed
     phases: list  # per phase: nodes added planning / validating, edges invalidated, RRT calls, searches, checks of transits
-    # and of smoothing, path length and straight distance, its transits' length and straight distance, duration
+    # and their pair tests (all, RRTConnect's, the shortcuts'), checks of smoothing, path length and straight distance, its
+    # transits' length and straight distance, duration
     arms: list  # arm names, the order of `holder` and `wrists`
     resolution: dict  # the transit and contact profiles
     stages: list

@@ -168,7 +168,8 @@ def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: 
     transits = [pc.path for pc in pieces if pc.part in TRANSIT_PARTS]
     return {"phase": name, "nodes_planning": st.nodes_planning, "nodes_validating": st.nodes_validating,
             "edges_invalidated": st.edges_invalidated, "rrt_calls": st.rrt_calls, "searches": st.searches,
-            "transit_checks": st.checks, "transit_pair_tests": st.pair_tests, "smoothing_checks": smoothing_checks,
+            "transit_checks": st.checks, "transit_pair_tests": st.pair_tests, "transit_pair_tests_rrt": st.pairs_rrt,
+            "transit_pair_tests_shortcut": st.pairs_shortcut, "smoothing_checks": smoothing_checks,
             "path_length": round(float(np.linalg.norm(np.diff(seg, axis=0), axis=1).sum()), 4),
             "straight_distance": round(float(np.linalg.norm(seg[-1] - seg[0])), 4) if len(seg) else 0.0,
             "transit_length": round(float(sum(np.linalg.norm(np.diff(x, axis=0), axis=1).sum() for x in transits)), 4),

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,6 +68,8 @@ class TransitStats:
     searches: int = 0
     checks: int = 0  # collision checks of the transits (their ends, connecting, validating, reconnecting, shortcutting)
     pair_tests: int = 0  # of those checks' pairs, how many reached the exact test (a count of narrow-phase work)
+    pairs_rrt: int = 0  # of those, the RRTConnect queries' (the baseline's) and reconnections' (ours')
+    pairs_shortcut: int = 0  # and the shortcuts'; the rest went to the ends, joining them to the graph and validating it
 
     @property
     def transit_seconds(self) -> float:
@@ -95,9 +98,10 @@ class LazyTransit:
     `near` (denser: paddings fitted to the query's ends) whatever touches the start or the goal."""
 
     def __init__(self, graph: MotionGraph, space: JointSpace, lazy: MotionValidity, full: MotionValidity, near: MotionValidity,
-                 params: TransitParams, rng: np.random.Generator, stats: TransitStats):
+                 params: TransitParams, rng: np.random.Generator, stats: TransitStats, pairs: Callable[[], int] = lambda: 0):
         self.graph, self.space, self.lazy, self.full, self.near, self.p, self.rng, self.stats = \
             graph, space, lazy, full, near, params, rng, stats
+        self.pairs = pairs  # the pair tests made so far by the checkers of these validities (for stats.pairs_rrt)
         self.ends: tuple[int, ...] = ()
         self.alone: set[int] = set()  # the ends no graph node joins
         self.status = PhaseStatus(graph)
@@ -234,11 +238,12 @@ class LazyTransit:
             reconnections += 1
             check = self.near if {a, *targets} & set(self.ends) else self.full
             single = a in self.alone  # the graph joins not this end: the query is the baseline's, and so is its budget
-            t_rrt = time.perf_counter()
+            t_rrt, pairs_before = time.perf_counter(), self.pairs()
             found = _rrt(self.space, check, self._config(a), np.array([self._config(n) for n in targets]),
                          int(self.rng.integers(2**31)), self.p.rrt_motions if single else self.p.reconnect_motions,
                          self.p.rrt_step)
             stats.seconds_reconnecting += time.perf_counter() - t_rrt
+            stats.pairs_rrt += self.pairs() - pairs_before
             t += time.perf_counter() - t_rrt  # the RRT's time is not validation's
             if found is None and single:
                 break

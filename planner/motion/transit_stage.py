@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -61,17 +61,20 @@ class TransitStage:
         full, near = self.validities.of(situation, q_start, idx).transit_validities(q_start, q_goal)
         checkers = [full.seg] if near.seg is full.seg else [full.seg, near.seg]  # one when no pair is fitted
         scratch = list({id(c.checker): c.checker for c in checkers}.values())  # the situation's, shared by both
-        before = sum(c.checks for c in checkers), sum(c.pair_tests for c in scratch)
+        def pairs() -> int:
+            return sum(c.pair_tests for c in scratch)
+
+        before = sum(c.checks for c in checkers), pairs()
         try:
-            return self._transit(part, q_start, q_goal, situation, space, full, near, arm)
+            return self._transit(part, q_start, q_goal, situation, space, full, near, arm, pairs)
         finally:
             self.stats.checks += sum(c.checks for c in checkers) - before[0]
-            self.stats.pair_tests += sum(c.pair_tests for c in scratch) - before[1]
+            self.stats.pair_tests += pairs() - before[1]
 
     def _transit(self, part: str, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, space: JointSpace,
-                 full: Validity, near: Validity, arm: str | None) -> Piece:
+                 full: Validity, near: Validity, arm: str | None, pairs: Callable[[], int]) -> Piece:
         """The transit's path, its ends checked first (see transit); what touches an end is checked `near` where it
-        fails `full` (see Graded)."""
+        fails `full` (see Graded). `pairs`: the pair tests the transit's checkers have made (counted per part)."""
         phase, stats, tp = self.phase, self.stats, self.transit_params
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not near.state_valid(q):
@@ -80,26 +83,30 @@ class TransitStage:
             near = Graded(full, near)
         detours = None  # a graph path's segments RRTConnect made (see shortcut_vertices)
         try:
-            if arm is not None:
-                path = rrt_transit(space, full, near, q_start, q_goal, dataclasses.replace(tp, rrt_motions=tp.reconnect_motions),
-                                   self.rng, stats)
-            elif self.baseline:
-                path = rrt_transit(space, full, near, q_start, q_goal, tp, self.rng, stats)
+            if arm is not None or self.baseline:  # one arm: the reconnections' budget
+                motions = tp.reconnect_motions if arm is not None else tp.rrt_motions
+                before = pairs()
+                try:
+                    path = rrt_transit(space, full, near, q_start, q_goal, dataclasses.replace(tp, rrt_motions=motions),
+                                       self.rng, stats)
+                finally:
+                    stats.pairs_rrt += pairs() - before
             else:  # a phase's queries share its RRT budget: once spent, they search the graph only
                 left = max(0, self.p.phase_reconnections - stats.rrt_calls)
                 params = dataclasses.replace(tp, max_reconnections=min(left, tp.max_reconnections))
-                query = LazyTransit(self.graph, space, full.on("changed"), full, near, params, self.rng, stats)
+                query = LazyTransit(self.graph, space, full.on("changed"), full, near, params, self.rng, stats, pairs)
                 path = query.query(q_start, q_goal)
                 detours = query.detours
         except TransitFailed as exc:
             raise PieceFailed(phase, part, str(exc)) from exc
-        t = time.perf_counter()
+        t, shortcut_before = time.perf_counter(), pairs()
         gain = tp.shortcut_min_gain
         longest = np.inf if detours is None else tp.graph_shortcut_length  # a graph path: see shortcut_vertices
         greedy = shortcut_vertices(path, full, near, gain, longest, detours)
         kept = None if detours is None else kept_detours(path, detours, greedy)
         path = shortcut(greedy, full, near, self.rng, tp.shortcut_attempts, gain, longest, kept)
         stats.seconds_shortcut += time.perf_counter() - t
+        stats.pairs_shortcut += pairs() - shortcut_before
         return Piece(phase, part, path, situation)
 
     def reach(self, q_start: np.ndarray, options: Iterator, option: tuple, situation: Situation) -> list[Piece]:
