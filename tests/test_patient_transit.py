@@ -121,3 +121,41 @@ def test_a_sequence_given_up_before_its_transits_adds_no_stage():
     assert "transit" not in attempt.tried[0] and sum(s.checks for s in padded.stats) == 0, attempt.tried
     assert all(s["stage"] != GIVEN_UP and s["count"] > 0 for s in attempt.stages if s["stage"] != "regrasp graph")
     assert _given_up(SimpleNamespace(stages=attempt.stages), attempt.seconds) == {"checks": 0, "pair_tests": 0, "seconds": 0.0}
+
+
+def test_a_graph_query_left_without_reconnections_says_why():
+    """The example's Rest transit planned hurriedly fails; its failure names the phase's RRTConnect budget when none is
+    left: none given (phase_reconnections 0), or spent by an earlier transit of the phase (1, taken by the first try,
+    which it lets succeed)."""
+    from dataclasses import replace
+
+    session = Session.open(EXAMPLE)
+    scene, roadmap, m = session.scene, session.result("roadmap"), session.result("motion")
+    robot = scene.robot
+    idx = transit_joints(robot)
+    rest = np.flatnonzero(m.phase == list(m.phase_names).index("Rest"))
+    qa = m.q[rest[0]]
+    qb = qa.copy()
+    qb[idx] = scene.q_final[idx]
+    situation = Situation(None, scene.object_final)
+
+    def failures(params: MotionParams) -> list[str]:
+        validities = Validities(scene, build_collision_model(robot, scene.environment),
+                                transit_profile(roadmap.resolution, params.transit_env_padding, params.transit_self_padding),
+                                contact_profile(params))
+        planner = DoubleGraspPlanner(scene, validities, MotionGraph(roadmap), params, np.random.default_rng(0), False)
+        stage, out = planner.stage(Phase.REST), []
+        for _ in range(2):
+            try:
+                stage.transit(qa, qb, situation)
+                out.append("")
+            except PieceFailed as exc:
+                out.append(exc.why)
+        return out
+
+    first, second = failures(HURRIED)
+    assert "0 RRT reconnections (motion.phase_reconnections is 0: no RRTConnect reconnection)" in first, first
+    first, second = failures(replace(HURRIED, phase_reconnections=1))
+    assert first == "", first  # found with the phase's one reconnection, which the second try then lacks
+    assert second.endswith("0 RRT reconnections (the phase's 1 RRTConnect call (motion.phase_reconnections) went to its "
+                           "earlier transits)"), second

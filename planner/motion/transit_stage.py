@@ -82,6 +82,7 @@ class TransitStage:
         if near.seg is not full.seg:  # dense only beside what the ends hold close
             near = Graded(full, near)
         detours = None  # a graph path's segments RRTConnect made (see shortcut_vertices)
+        spent = ""  # why a graph query may not reconnect (told with its failure)
         try:
             if arm is not None or self.baseline:  # one arm: the reconnections' budget
                 motions = tp.reconnect_motions if arm is not None else tp.rrt_motions
@@ -93,12 +94,17 @@ class TransitStage:
                     stats.pairs_rrt += pairs() - before
             else:  # a phase's queries share its RRT budget: once spent, they search the graph only
                 left = max(0, self.p.phase_reconnections - stats.rrt_calls)
+                if left == 0 < tp.max_reconnections:
+                    n = self.p.phase_reconnections
+                    spent = (" (motion.phase_reconnections is 0: no RRTConnect reconnection)" if n == 0 else
+                             f" (the phase's {n} RRTConnect call{'s' if n > 1 else ''} (motion.phase_reconnections) went to its "
+                             "earlier transits)")
                 params = dataclasses.replace(tp, max_reconnections=min(left, tp.max_reconnections))
                 query = LazyTransit(self.graph, space, full.on("changed"), full, near, params, self.rng, stats, pairs)
                 path = query.query(q_start, q_goal)
                 detours = query.detours
         except TransitFailed as exc:
-            raise PieceFailed(phase, part, str(exc)) from exc
+            raise PieceFailed(phase, part, str(exc) + spent) from exc
         t, shortcut_before = time.perf_counter(), pairs()
         gain = tp.shortcut_min_gain
         longest = np.inf if detours is None else tp.graph_shortcut_length  # a graph path: see shortcut_vertices
