@@ -122,21 +122,28 @@ def test_same_seed_same_double_grasps(default_scene, tmp_path):
 
 
 def test_exchange_ik_runs_with_the_sessions_grasp_config_parameters(planned, tmp_path, monkeypatch):
-    """`--set grasp_configs.<p>` reaches the double grasps' exchange IK (only its torso_sigma is the double grasps' own)."""
+    """`--set grasp_configs.<p>` reaches the double grasps' exchange IK (only its torso_sigma is the double grasps' own),
+    whose torso is sampled around the task's start, or around the rest with `free_around = "rest"`."""
     import planner.handover.double_grasps as step
 
     seen = []
 
     class Spy(step.ConfigSampler):
         def __init__(self, robot, collision, scorer, p):
-            seen.append(p)
             super().__init__(robot, collision, scorer, p)
+            seen.append((p, self.center))
 
     monkeypatch.setattr(step, "ConfigSampler", Spy)
-    branch = planned.branch(tmp_path / "branch", "grasp_configs")
-    few = {"grasp_configs": {**FEW_CONFIGS["grasp_configs"], "ik_iterations": 31}, "double_grasps": {"torso_sigma": 0.05}}
-    run_pipeline(branch, "double_grasps", few)
-    assert [(p.ik_iterations, p.torso_sigma) for p in seen] == [(31, 0.05)]
+    scene = planned.scene
+    for k, (around, center) in enumerate((("task", scene.q_initial), ("rest", scene.robot.q_rest))):
+        branch = planned.branch(tmp_path / f"branch{k}", "grasp_configs")
+        few = {"grasp_configs": {**FEW_CONFIGS["grasp_configs"], "ik_iterations": 31, "free_around": around},
+               "double_grasps": {"torso_sigma": 0.05}}
+        run_pipeline(branch, "double_grasps", few)
+        (p, sampled_around), = seen[k:]
+        assert (p.ik_iterations, p.torso_sigma) == (31, 0.05)
+        np.testing.assert_array_equal(sampled_around, center)
+    assert not np.array_equal(scene.q_initial, scene.robot.q_rest)  # the default task starts with its elbows bent
 
 
 def _plan(*args: str) -> subprocess.CompletedProcess:

@@ -6,9 +6,9 @@ grasp qualities plus the minimum of its two configuration scores, each normalise
 value over the compatible pairs. Down the ranking, each pair gets an exchange configuration: the
 object's orientation turns each grasp's approach direction towards its arm's shoulder (Wahba's
 problem, scipy), its position is the best exchange node, then Gaussian samples around it; the torso
-is sampled near rest and both arms are solved by IK; the object is tested against the environment
-and the robot against itself, the environment and the object. The first `count` pairs that get one
-are returned, best first.
+is sampled near the task's start (near the rest with grasp_configs.free_around = "rest") and both
+arms are solved by IK; the object is tested against the environment and the robot against itself,
+the environment and the object. The first `count` pairs that get one are returned, best first.
 A direct transfer (one arm picks and places) pairs each grasp with itself: the grasps with a
 configuration at both placements, ranked the same way; the object never changes hands, so a row's
 exchange configuration is its place configuration and its exchange pose the final placement.
@@ -158,7 +158,8 @@ def run(ctx: StepContext) -> StepOutput:
     order = np.lexsort((np.arange(len(pairs)), -score))
     collision = ObjectCollision(scene)
     config_params = dataclasses.replace(ctx.input_params["grasp_configs"], torso_sigma=p.torso_sigma)
-    sampler = ConfigSampler(robot, collision, ConfigScorer(robot, config_params.weights()), config_params)
+    center = config_params.center(robot, scene.q_initial)  # the torso around the task's start (grasp_configs.free_around)
+    sampler = ConfigSampler(robot, collision, ConfigScorer(robot, config_params.weights(), center), config_params)
     approach = {arm: approach_direction(robot, arm) for arm in (a, b)}
     shoulders = dict(zip(robot.spec.arm_names, np.asarray(exchange.shoulders)))
     found: list = []
