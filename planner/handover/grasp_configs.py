@@ -42,8 +42,8 @@ class GraspConfigParams:
         16, 0, 1000, "IK starts", "more IK starts, torso and free arm over their whole ranges, for a grasp the first ones miss")
     keep: int = bounded(
         2, 1, 100, "configurations", "a grasp stops after this many collision-free configurations; its best-scored one is kept")
-    free_around: str = described("task", "torso and free arm sampled and scored around the robot's start (pick) or end "
-                                 "(place) configuration, or its rest", ("task", "rest"))
+    free_around: str = described("task", "torso, free arm sampled and scored around the start (pick, exchange) or end "
+                                 "(place) configuration, or the rest", ("task", "rest"))
     torso_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the torso joints around their center (free_around)")
     free_arm_sigma: float = bounded(0.1, 0.0, 3.1416, "rad", "spread of the free arm's joints around their center (free_around)")
     position_tolerance: float = bounded(0.002, 1e-5, 0.05, "m", "palm position to its grasp pose, at most")
