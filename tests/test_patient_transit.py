@@ -31,28 +31,35 @@ EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example
 HURRIED = MotionParams(reconnect_motions=1, connections=1, max_connections=1, goal_nodes=1, max_searches=1, phase_reconnections=0)
 
 
-def test_a_transit_the_quick_search_misses_is_found_patiently():
+def _rest_transit() -> tuple[Session, np.ndarray, np.ndarray, Situation]:
+    """The example session and its Rest transit: from where the placing hand retreated to the final configuration."""
     session = Session.open(EXAMPLE)
-    scene, roadmap, m = session.scene, session.result("roadmap"), session.result("motion")
-    robot = scene.robot
-    idx = transit_joints(robot)
+    scene, m = session.scene, session.result("motion")
+    idx = transit_joints(scene.robot)
     rest = np.flatnonzero(m.phase == list(m.phase_names).index("Rest"))
     qa = m.q[rest[0]]
     qb = qa.copy()
     qb[idx] = scene.q_final[idx]
-    situation = Situation(None, scene.object_final)
+    return session, qa, qb, Situation(None, scene.object_final)
+
+
+def _planner(session: Session, params: MotionParams, patient: bool = False) -> DoubleGraspPlanner:
+    scene, roadmap = session.scene, session.result("roadmap")
+    validities = Validities(scene, build_collision_model(scene.robot, scene.environment),
+                            transit_profile(roadmap.resolution, params.transit_env_padding, params.transit_self_padding),
+                            contact_profile(params))
+    return DoubleGraspPlanner(scene, validities, MotionGraph(roadmap), params, np.random.default_rng(0), False, patient)
+
+
+def test_a_transit_the_quick_search_misses_is_found_patiently():
+    session, qa, qb, situation = _rest_transit()
+    scene = session.scene
     job = (Phase.REST, lambda stage: [stage.transit(qa, qb, situation)])
 
-    def planner(patient: bool) -> DoubleGraspPlanner:
-        validities = Validities(scene, build_collision_model(robot, scene.environment),
-                                transit_profile(roadmap.resolution, HURRIED.transit_env_padding, HURRIED.transit_self_padding),
-                                contact_profile(HURRIED))
-        return DoubleGraspPlanner(scene, validities, MotionGraph(roadmap), HURRIED, np.random.default_rng(0), False, patient)
-
-    quick = planner(False).transits([job])[0]
+    quick = _planner(session, HURRIED).transits([job])[0]
     assert isinstance(quick, PieceFailed), "the hurried search found the transit: nothing left to find patiently"
 
-    patient = planner(True)
+    patient = _planner(session, HURRIED, patient=True)
     found = patient.transits([job])[0]
     assert not isinstance(found, PieceFailed), f"not found patiently either: {found}"
     assert patient.stats[Phase.REST].rrt_calls > 0, "no patient reconnection was made"
@@ -129,22 +136,10 @@ def test_a_graph_query_left_without_reconnections_says_why():
     which it lets succeed)."""
     from dataclasses import replace
 
-    session = Session.open(EXAMPLE)
-    scene, roadmap, m = session.scene, session.result("roadmap"), session.result("motion")
-    robot = scene.robot
-    idx = transit_joints(robot)
-    rest = np.flatnonzero(m.phase == list(m.phase_names).index("Rest"))
-    qa = m.q[rest[0]]
-    qb = qa.copy()
-    qb[idx] = scene.q_final[idx]
-    situation = Situation(None, scene.object_final)
+    session, qa, qb, situation = _rest_transit()
 
     def failures(params: MotionParams) -> list[str]:
-        validities = Validities(scene, build_collision_model(robot, scene.environment),
-                                transit_profile(roadmap.resolution, params.transit_env_padding, params.transit_self_padding),
-                                contact_profile(params))
-        planner = DoubleGraspPlanner(scene, validities, MotionGraph(roadmap), params, np.random.default_rng(0), False)
-        stage, out = planner.stage(Phase.REST), []
+        stage, out = _planner(session, params).stage(Phase.REST), []
         for _ in range(2):
             try:
                 stage.transit(qa, qb, situation)
