@@ -83,8 +83,14 @@ def test_on_several_roadmaps_each_run_of_ours_is_paired_with_rrtconnect_on_its_s
     assert d["ours_pair_tests_median"] == 4 * 25  # over all four runs of ours
     assert [(r["roadmap"], r["pair_tests"], r["success"]) for r in d["per_roadmap"]] == [(0, 4 * 20, 1.0), (1, 4 * 35, 0.5)]
     assert d["per_roadmap"][1]["duration"] == 4 * 2.0  # the successful run's
+    # summed with RRTConnect's run of each seed once per run of ours: pair tests 4 * (10 + 30 + 50 + 20) against
+    # 4 * 60 * 4; seconds 1.5 + 1.5 + 4.5 + 20.5 against 2.5 + 5.5 + 2.5 + 5.5
+    assert (d["ours_pair_tests_total"], d["rrt_pair_tests_total"]) == (440, 960)
+    assert abs(d["pair_test_ratio_total"] - 960 / 440) < 1e-9
+    assert (d["ours_seconds_total"], d["rrt_seconds_total"]) == (28.0, 16.0) and abs(d["speedup_total"] - 16 / 28) < 1e-9
     text = bench.render()
     assert "over 2 seeds x 2 roadmaps" in text and "ours per roadmap" in text
+    assert "transit pair tests 440 / 960 (RRTConnect / ours 2.18), step 28.0 / 16.0 s (0.57)" in text
     json.dumps(d)
 
 

@@ -37,6 +37,7 @@ class MotionBench:
                 "pair_test_ratio_bound": (rrt["pair_tests"] / ours["pair_parts"]["shortcutting"]
                                           if ours["pair_parts"]["shortcutting"] > 0 else None),
                 "speedup_bound": (rrt["seconds"] / ours["untransit_seconds"] if ours["untransit_seconds"] > 0 else None),
+                **self.totals(),
                 "ours_success": ours["success"], "rrt_success": rrt["success"],
                 "ours_duration_median": ours["duration"], "rrt_duration_median": rrt["duration"],
                 "full_check_us_before": self.check_us[0], "full_check_us_after": self.check_us[1],
@@ -81,6 +82,16 @@ class MotionBench:
         ratios = [_transit_seconds(b) / _transit_seconds(a) for a, b in self._pairs()
                   if a["phases"] and b["phases"] and _transit_seconds(a) > 0]
         return _median(ratios) if ratios else None
+
+    def totals(self) -> dict:
+        """Sums over ours' runs and RRTConnect's run of the same seed (once per run of ours): transit pair tests and the
+        step's seconds, and their ratios. A median hides the seeds where one planner spends most (double grasps given up
+        after whole queries); a sum shows them."""
+        pairs = self._pairs()
+        ours, rrt = sum(_pair_tests(a) for a, _ in pairs), sum(_pair_tests(b) for _, b in pairs)
+        ours_s, rrt_s = sum(a["seconds"] for a, _ in pairs), sum(b["seconds"] for _, b in pairs)
+        return {"ours_pair_tests_total": ours, "rrt_pair_tests_total": rrt, "pair_test_ratio_total": _ratio(rrt, ours),
+                "ours_seconds_total": ours_s, "rrt_seconds_total": rrt_s, "speedup_total": _ratio(rrt_s, ours_s)}
 
     def _pairs(self) -> list[tuple[dict, dict]]:
         """(ours, RRTConnect's) of each run of ours, with RRTConnect's run of the same seed."""
@@ -172,6 +183,10 @@ class MotionBench:
         if d["speedup_bound"]:
             out.append(f"  the step's speedup at most {d['speedup_bound']:.2f} were ours' transits free (RRTConnect median / "
                        "ours' step less its transits' seconds, median)")
+        out.append(f"summed over the runs (each of ours with RRTConnect's on its seed): transit pair tests "
+                   f"{d['ours_pair_tests_total']:,} / {d['rrt_pair_tests_total']:,} (RRTConnect / ours {d['pair_test_ratio_total']:.2f}), "
+                   f"step {d['ours_seconds_total']:.1f} / {d['rrt_seconds_total']:.1f} s ({d['speedup_total']:.2f}): a median hides "
+                   "the seeds where one planner spends most")
         if d["check_ratio"]:
             out.append(f"transit collision checks (RRTConnect median / ours): {d['check_ratio']:.2f} (a count: the same on any machine)")
         out.append(f"a full collision check (regrasp bench collision) took {self.check_us[0]:.0f} µs before the runs and "
