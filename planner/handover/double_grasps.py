@@ -28,7 +28,6 @@ from planner.core.results import array
 from planner.core.stages import StageLog
 from planner.core.steps import Step, StepContext, StepOutput
 from planner.grasping.grasp_list import GraspList
-from planner.handover.config_score import ConfigScorer
 from planner.handover.grasp_configs import ConfigSampler
 from planner.handover.reach import approach_direction
 from planner.model.hand_model import load_hand_model
@@ -158,8 +157,8 @@ def run(ctx: StepContext) -> StepOutput:
     order = np.lexsort((np.arange(len(pairs)), -score))
     collision = ObjectCollision(scene)
     config_params = dataclasses.replace(ctx.input_params["grasp_configs"], torso_sigma=p.torso_sigma)
-    center = config_params.center(robot, scene.q_initial)  # the torso around the task's start (grasp_configs.free_around)
-    sampler = ConfigSampler(robot, collision, ConfigScorer(robot, config_params.weights(), center), config_params)
+    scorer = config_params.scorer(robot, scene.q_initial)  # the torso around the task's start (grasp_configs.free_around)
+    sampler = ConfigSampler(robot, collision, scorer, config_params)
     approach = {arm: approach_direction(robot, arm) for arm in (a, b)}
     shoulders = dict(zip(robot.spec.arm_names, np.asarray(exchange.shoulders)))
     found: list = []

@@ -62,10 +62,10 @@ class GraspConfigParams:
     def weights(self) -> ScoreWeights:
         return ScoreWeights(self.arm_weight, self.free_weight, self.joint_scale, self.length_scale)
 
-    def center(self, robot: Robot, task_q: np.ndarray) -> np.ndarray:
-        """The configuration whose torso and free arms are sampled and scored around: `task_q` (where the task holds
-        the robot when it grasps) or the robot's rest."""
-        return task_q if self.free_around == "task" else robot.q_rest
+    def scorer(self, robot: Robot, task_q: np.ndarray) -> ConfigScorer:
+        """The scorer whose reference the torso and free arms are sampled and scored around: `task_q` (where the task
+        holds the robot when it grasps) or the robot's rest (`free_around`)."""
+        return ConfigScorer(robot, self.weights(), task_q if self.free_around == "task" else robot.q_rest)
 
 
 @dataclass(frozen=True)
@@ -211,8 +211,8 @@ def hand_job(job: HandJob) -> tuple[np.ndarray, HandConfigs, StageLog]:
     obstacles = ObstacleTest.of_environment(scene.environment, collision.model.params.env_padding)
     free = environment_filter(scene.robot, grasps, job.object_pose, obstacles)
     log.done(f"{job.role} grasps clear of the environment", free.sum(), f"of {len(grasps)} at the {placement} pose")
-    center = job.params.center(scene.robot, scene.q_initial if job.role == "pick" else scene.q_final)
-    sampler = ConfigSampler(scene.robot, collision, ConfigScorer(scene.robot, job.params.weights(), center), job.params)
+    scorer = job.params.scorer(scene.robot, scene.q_initial if job.role == "pick" else scene.q_final)
+    sampler = ConfigSampler(scene.robot, collision, scorer, job.params)
     configs = hand_configurations(sampler, grasps, np.flatnonzero(free), job.object_pose, job.start, job.rng)
     log.done(f"{job.role} grasp configurations", len(configs.rank), f"collision-free, object at the {placement} pose")
     return free, configs, log

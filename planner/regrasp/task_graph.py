@@ -21,7 +21,6 @@ import numpy as np
 
 from planner.collision.object_obstacle import ObjectCollision
 from planner.grasping.grasp_list import GraspList
-from planner.handover.config_score import ConfigScorer
 from planner.handover.double_grasps import DoubleGrasps
 from planner.handover.grasp_configs import ConfigSampler, GraspConfigParams, GraspConfigs
 from planner.model.geometry import rotation_angle
@@ -62,8 +61,8 @@ class TaskGraph:
         self.hp, self.hq = configs.hand("pick"), configs.hand("place")
         self.limits, self.allowed = limits, set(allowed)
         quick = dataclasses.replace(params, wide_attempts=0, keep=1)
-        center = quick.center(scene.robot, scene.q_initial)  # the free arm as the task starts, like the pick's
-        self.sampler = ConfigSampler(scene.robot, ObjectCollision(scene), ConfigScorer(scene.robot, quick.weights(), center), quick)
+        scorer = quick.scorer(scene.robot, scene.q_initial)  # the free arm as the task starts, like the pick's
+        self.sampler = ConfigSampler(scene.robot, ObjectCollision(scene), scorer, quick)
         self.take = REGRASP if self.a == self.b else TABLE  # what taking the object at an intermediate placement is
         both = np.zeros(0, int)
         if placements is not None and len(placements):  # none given: the handover alone
