@@ -141,3 +141,31 @@ def test_the_transits_pair_tests_are_split_by_part_and_bound_what_the_ratios_cou
     assert "where the transits' pair tests go (median): ends and graph 60, RRTConnect 42, shortcutting 18, given up 4" in text
     assert "at most 22.22 were ours' ends, graph and RRT work free" in text and "at most 5.00 were ours' transits free" in text
     json.dumps(d)
+
+
+def _smoothing_run(seed: int, seconds: float, bare: float, duration: float, bare_duration: float, checks: int,
+                   success: bool = True) -> dict:
+    """One seed's record as bench_smoothing keeps it: the step's seconds and the motion's duration with the smoothing
+    and without it."""
+    return {"seed": seed, "success": success, "failure": "" if success else "Place phase: no path", "seconds": seconds,
+            "unsmoothed_seconds": bare, "timing_seconds": seconds - bare + 0.1, "unsmoothed_timing_seconds": 0.1,
+            "duration": duration, "unsmoothed_duration": bare_duration, "smoothing_checks": checks}
+
+
+def test_the_smoothings_planning_growth_is_the_median_of_per_seed_ratios_over_the_runs_that_moved():
+    from planner.cli.bench_smoothing import SmoothingBench
+
+    # per seed smoothed / unsmoothed - 1: 0.5, 0.1, 0.3 -> 0.3 (the ratio of the medians would be 1.5 / 1.0 - 1 = 0.5)
+    runs = [_smoothing_run(0, 1.5, 1.0, 20.0, 40.0, 6000), _smoothing_run(1, 2.2, 2.0, 22.0, 42.0, 8000),
+            _smoothing_run(2, 1.3, 1.0, 21.0, 45.0, 7000), _smoothing_run(3, 9.0, 1.0, 0.0, 0.0, 0, success=False)]
+    bench = SmoothingBench([0, 1, 2, 3], runs)
+    d = bench.to_dict()
+    assert abs(d["planning_growth_median"] - 0.3) < 1e-12 and d["growth_target"] == 0.2
+    assert d["success"] == 0.75 and d["step_seconds_median"] == 1.5 and d["unsmoothed_step_seconds_median"] == 1.0
+    assert d["duration_median"] == 21.0 and d["unsmoothed_duration_median"] == 42.0 and d["saved_median"] == 20.0
+    assert d["checks_per_second_saved"] == 21000 / (20.0 + 20.0 + 24.0) and d["smoothing_checks_median"] == 7000
+    json.dumps(d)  # what --json writes
+    text = bench.render()
+    assert "the smoothing adds 30% to the step's planning time" in text and "at most 20% asked" in text
+    assert "1.00 -> 1.50 s (medians)" in text and "42.00 -> 21.00 s" in text
+    assert "3       no motion: Place phase: no path" in text

@@ -102,6 +102,24 @@ def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
     assert "ours per roadmap" in run.stdout and "the roadmap of session seed 1" in run.stderr
 
 
+@pytest.mark.slow  # about 15 s from an empty cache: grasp lists, a 4-node roadmap, two motions
+def test_bench_smoothing_from_an_empty_cache(tmp_path):
+    out = tmp_path / "smoothing.json"
+    small = ("roadmap.nodes=4", "roadmap.task_nodes=0", "pick_grasps.orientations=16", "place_grasps.orientations=16",
+             "motion.smooth_checks=2000")
+    run = sandbox.regrasp("bench", "smoothing", "--seeds", "1", "--repeat", "1", *(a for s in small for a in ("--set", s)),
+                          "--json", str(out), REGRASP_CACHE=str(tmp_path / "cache"))
+    assert run.returncode == 0, run.stderr
+    figures = json.loads(out.read_text())
+    (row,) = figures["runs"]
+    assert row["seed"] == 0 and row["success"] and figures["success"] == 1.0
+    assert 0 < row["smoothing_checks"] <= 2000  # --set reached the smoothed run (24,000 by default)
+    assert row["duration"] < row["unsmoothed_duration"]  # timed rest to rest at every vertex, the motion is longer
+    assert row["seconds"] > 0 and row["unsmoothed_seconds"] > 0
+    assert figures["planning_growth_median"] == row["seconds"] / row["unsmoothed_seconds"] - 1.0
+    assert "the smoothing adds" in run.stdout and "at most 20% asked" in run.stdout
+
+
 def test_bench_motion_refuses_to_set_what_it_compares():
     run = regrasp("bench", "motion", "--seeds", "1", "--set", "motion.planner=rrt")
     assert run.returncode == 2 and run.stderr.strip().splitlines() == [
@@ -147,7 +165,7 @@ def test_task_is_the_same_positional_in_every_command():
     commands = _commands()
     takes_task = {name for name, c in commands.items() if any(a.dest == "task" for a in c.arguments)}
     assert takes_task == {"workbench", "check", "plan", "roadmap", "grasps", "bench collision", "bench double-grasps", "bench motion",
-                          "bench grasps"}
+                          "bench smoothing", "bench grasps"}
     for name in takes_task:
         (task,) = [a for a in commands[name].arguments if a.dest == "task"]
         assert task.option_strings == [] and task.type is task_argument and task.nargs == "?", name

@@ -1,5 +1,6 @@
-"""`regrasp bench collision`, `bench double-grasps`, `bench motion` and `bench grasps`: the benchmarks of planner/cli/bench.py,
-bench_motion.py and bench_grasps.py with their options, printed as tables (and written as JSON with --json)."""
+"""`regrasp bench collision`, `bench double-grasps`, `bench motion`, `bench smoothing` and `bench grasps`: the benchmarks of
+planner/cli/bench.py, bench_motion.py, bench_smoothing.py and bench_grasps.py with their options, printed as tables (and
+written as JSON with --json)."""
 from __future__ import annotations
 
 import argparse
@@ -59,6 +60,14 @@ def _cmd_bench_motion(args: argparse.Namespace) -> int:
                                                                         params))
 
 
+def _cmd_bench_smoothing(args: argparse.Namespace) -> int:
+    from planner.cli.bench_smoothing import bench_smoothing
+    from planner.cli.plan import step_params
+
+    params = step_params(args.set or [])  # a bad --set fails here, before any step runs
+    return _bench_in_scratch(args, lambda scene, tmp, say: bench_smoothing(scene, args.seeds, tmp, say, args.repeat, params))
+
+
 def _cmd_bench_grasps(args: argparse.Namespace) -> int:
     from planner.cli.bench_grasps import BASELINE, bench_grasps
     from planner.grasping.grasp_list import hand_spec_of, session_grasp_seed
@@ -78,7 +87,7 @@ def _cmd_bench_grasps(args: argparse.Namespace) -> int:
 
 
 def add_bench(line: CommandLine) -> None:
-    """`regrasp bench` and its four benchmarks."""
+    """`regrasp bench` and its five benchmarks."""
     line.group("bench", "benchmarks, printed as tables", dest="what", metavar="WHAT")
     bc = line.command("collision", "collision checking and forward kinematics timings", _cmd_bench, within="bench")
     add_task(bc)
@@ -106,6 +115,16 @@ def add_bench(line: CommandLine) -> None:
     bm.add("--set", action="append", metavar="STEP.PARAM=VALUE",
            help="a step parameter for every run (repeatable; `regrasp params` lists them; not motion.planner or motion.strategy)")
     add_json(bm, "the figures")
+    bs = line.command("smoothing", "the motion step with its smoothing and without it, per seed: the planning time it adds, "
+                      "the motion time it saves", _cmd_bench_smoothing, within="bench")
+    add_task(bs)
+    bs.add("--seeds", type=positive_int, default=5, help="online seeds 0..N-1 (grasp lists and roadmap: seed 0, cached)")
+    bs.add("--repeat", type=positive_int, default=3, metavar="K",
+           help="plan each seed K times with and K times without smoothing, alternately, and keep each one's fastest run")
+    bs.add("--set", action="append", metavar="STEP.PARAM=VALUE",
+           help="a step parameter for every run (repeatable; `regrasp params` lists them); the runs without smoothing set "
+                "motion.smooth_checks and motion.smooth_attempts to 0")
+    add_json(bs, "the figures")
     bg = line.command("grasps", "each hand's grasp list: frames left per stage, grasps, seconds, grasps per second, and the "
                       "ratio to an earlier commit's builder run side by side", _cmd_bench_grasps, within="bench")
     add_task(bg)

@@ -252,25 +252,14 @@ def _median(values: list) -> float:
 CHECK_SAMPLES = 500  # configurations a motion benchmark times a full check at, before and after its runs
 
 
-def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int = 1, roadmaps: int = 1,
-                 params: dict | None = None) -> MotionBench:
-    """The offline steps once (seed 0, from the cache when there); per seed the online steps, then the motion planned with
-    the Super Graph and with RRTConnect alone from the same double grasps (rank order and contact motions are shared),
-    `repeat` times each, the fastest run kept (the same seed gives the same motion: only its time varies). `roadmaps` K:
-    ours on the roadmaps sessions 0..K-1 build (one roadmap's seed moves ours' figures as much as a change may), RRTConnect
-    alone once per seed (it uses no roadmap). `params`: step -> parameter overrides (`--set`), for every run."""
+def bench_inputs(scene: Scene, folder, progress, params: dict, roadmaps: int = 1) -> tuple[dict, dict, list]:
+    """(each step's parameters, the offline steps' results, the roadmaps of session seeds 0..roadmaps-1): the offline
+    steps run once (seed 0, from the user cache when there), as a motion benchmark's seeds share them."""
     from planner.core.runner import run_pipeline
     from planner.core.session import Session
-    from planner.core.steps import StepContext, step_seed
-    from planner.motion import PHASES, plan_motion
-    from planner.pipeline import PIPELINE, step_named
+    from planner.pipeline import PIPELINE
     from planner.roadmap.step import roadmap_for, session_roadmap_seed
 
-    params = params or {}
-    chosen = {"planner", "strategy"} & set(params.get("motion", {}))
-    if chosen:
-        raise RegraspError(f"--set: bench motion sets motion.{' and motion.'.join(sorted(chosen))} itself (it compares the planners "
-                         "on the handover)")
     made = {step.name: step.make_params(params.get(step.name)) for step in PIPELINE}
     base = Session.create(folder / "base", scene, 0)
     progress("offline steps: arms and grasp lists (from the user cache when computed before) ...")
@@ -280,25 +269,61 @@ def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int =
     for r in range(roadmaps):
         progress(f"the roadmap of session seed {r} (from the user cache when built before) ...")
         graphs.append(roadmap_for(scene, made["roadmap"], session_roadmap_seed(r))[0])
+    return made, offline, graphs
+
+
+def seed_inputs(scene: Scene, made: dict, offline: dict, graph, seed: int) -> dict:
+    """The results the motion step reads for an online seed: the offline ones, the roadmap and the online steps'."""
+    from planner.core.steps import StepContext, step_seed
+    from planner.pipeline import step_named
+
+    results = {**offline, "roadmap": graph}
+    for name in ONLINE_STEPS:
+        step = step_named(name)
+        ctx = StepContext(scene, {n: results[n] for n in step.needs}, {n: made[n] for n in step.needs},
+                          made[name], np.random.default_rng(step_seed(seed, name)))
+        results[name] = step.run(ctx).result
+    return results
+
+
+def timed_motion(scene: Scene, results: dict, made: dict, motion_params, seed: int, repeat: int = 1) -> tuple[float, object, list]:
+    """(wall seconds, motion, its stages' seconds) of the fastest of `repeat` plans of the seed's motion (the same seed
+    gives the same motion each time: only its time varies)."""
+    from planner.core.steps import step_seed
+    from planner.motion import plan_motion
+
+    timed = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        motion, seconds = plan_motion(scene, results["pick_grasps"], results["place_grasps"], results["double_grasps"],
+                                      results["roadmap"], motion_params, np.random.default_rng(step_seed(seed, "motion")),
+                                      configs=(results["grasp_configs"], made["grasp_configs"]))
+        timed.append((time.perf_counter() - start, motion, seconds))
+    return min(timed, key=lambda run: run[0])
+
+
+def bench_motion(scene: Scene, seeds: int, folder, progress=print, repeat: int = 1, roadmaps: int = 1,
+                 params: dict | None = None) -> MotionBench:
+    """The offline steps once (seed 0, from the cache when there); per seed the online steps, then the motion planned with
+    the Super Graph and with RRTConnect alone from the same double grasps (rank order and contact motions are shared),
+    `repeat` times each, the fastest run kept (the same seed gives the same motion: only its time varies). `roadmaps` K:
+    ours on the roadmaps sessions 0..K-1 build (one roadmap's seed moves ours' figures as much as a change may), RRTConnect
+    alone once per seed (it uses no roadmap). `params`: step -> parameter overrides (`--set`), for every run."""
+    from planner.motion import PHASES
+
+    params = params or {}
+    chosen = {"planner", "strategy"} & set(params.get("motion", {}))
+    if chosen:
+        raise RegraspError(f"--set: bench motion sets motion.{' and motion.'.join(sorted(chosen))} itself (it compares the planners "
+                         "on the handover)")
+    made, offline, graphs = bench_inputs(scene, folder, progress, params, roadmaps)
     runs: dict = {"roadmap": [], "rrt": []}
     before = bench_collision(scene, CHECK_SAMPLES).full_check_us_median
     for seed in range(seeds):
-        results = {**offline, "roadmap": graphs[0]}
-        for name in ONLINE_STEPS:
-            step = step_named(name)
-            ctx = StepContext(scene, {n: results[n] for n in step.needs}, {n: made[n] for n in step.needs},
-                              made[name], np.random.default_rng(step_seed(seed, name)))
-            results[name] = step.run(ctx).result
+        results = seed_inputs(scene, made, offline, graphs[0], seed)
         for planner, r in [("roadmap", r) for r in range(roadmaps)] + [("rrt", None)]:
-            timed = []
-            for _ in range(repeat):
-                start = time.perf_counter()
-                motion, seconds = plan_motion(scene, results["pick_grasps"], results["place_grasps"], results["double_grasps"],
-                                              graphs[r or 0], replace(made["motion"], planner=planner, strategy="handover"),
-                                              np.random.default_rng(step_seed(seed, "motion")),
-                                              configs=(results["grasp_configs"], made["grasp_configs"]))
-                timed.append((time.perf_counter() - start, seconds))
-            elapsed, seconds = min(timed, key=lambda run: run[0])
+            elapsed, motion, seconds = timed_motion(scene, {**results, "roadmap": graphs[r or 0]}, made,
+                                                    replace(made["motion"], planner=planner, strategy="handover"), seed, repeat)
             failed = next((why for why in motion.tried if why), "")
             done = len(PHASES) if not motion.failure else next(i for i, n in enumerate(PHASES) if failed.startswith(n))
             runs[planner].append({"seed": seed, "roadmap": r, "seconds": elapsed, "success": not motion.failure,

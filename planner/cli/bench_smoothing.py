@@ -1,0 +1,98 @@
+"""`regrasp bench smoothing`: the motion step planned with its smoothing and without it, from the same inputs and in
+the same minutes, per seed: how much planning time the smoothing adds against how much motion time it saves."""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from planner.cli.bench_motion import bench_inputs, seed_inputs, timed_motion
+from planner.model.task import Scene
+
+GROWTH_TARGET = 0.20  # the planning time the smoothing may add, as a share of the step planned without it (issue 34)
+
+
+@dataclass(frozen=True)
+class SmoothingBench:
+    """Per seed, the motion step with the smoothing (`--set` as given) and without it (no shortcut attempted)."""
+
+    seeds: list
+    runs: list  # per seed: {"seed", "success", "seconds", "unsmoothed_seconds", "timing_seconds", "unsmoothed_timing_seconds",
+    #              "duration", "unsmoothed_duration", "smoothing_checks"}
+    repeat: int = 1  # runs per seed and setting, the fastest kept
+
+    def to_dict(self) -> dict:
+        ok = [r for r in self.runs if r["success"]]
+        growth = [r["seconds"] / r["unsmoothed_seconds"] - 1.0 for r in ok if r["unsmoothed_seconds"] > 0]
+        saved = [r["unsmoothed_duration"] - r["duration"] for r in ok]
+        checks = sum(r["smoothing_checks"] for r in ok)
+        return {"seeds": self.seeds, "repeat": self.repeat, "success": len(ok) / len(self.runs) if self.runs else float("nan"),
+                "step_seconds_median": _median([r["seconds"] for r in ok]),
+                "unsmoothed_step_seconds_median": _median([r["unsmoothed_seconds"] for r in ok]),
+                "planning_growth_median": _median(growth), "growth_target": GROWTH_TARGET,
+                "timing_seconds_median": _median([r["timing_seconds"] for r in ok]),
+                "unsmoothed_timing_seconds_median": _median([r["unsmoothed_timing_seconds"] for r in ok]),
+                "duration_median": _median([r["duration"] for r in ok]),
+                "unsmoothed_duration_median": _median([r["unsmoothed_duration"] for r in ok]),
+                "saved_median": _median(saved), "smoothing_checks_median": _median([r["smoothing_checks"] for r in ok]),
+                "checks_per_second_saved": checks / sum(saved) if sum(saved) > 0 else float("nan"), "runs": self.runs}
+
+    def render(self) -> str:
+        d = self.to_dict()
+        fastest = f", the fastest of {self.repeat} runs each" if self.repeat > 1 else ""
+        out = [f"the motion step with and without smoothing, {len(self.seeds)} seeds{fastest}",
+               f"{'seed':<6}{'step s':>8}{'unsmoothed':>11}{'growth':>8}{'timing s':>10}{'unsmoothed':>11}{'motion s':>10}"
+               f"{'unsmoothed':>11}{'checks':>8}"]
+        for r in self.runs:
+            if not r["success"]:
+                out.append(f"{r['seed']:<6}  no motion: {r['failure'][:100]}")
+                continue
+            out.append(f"{r['seed']:<6}{r['seconds']:>8.2f}{r['unsmoothed_seconds']:>11.2f}"
+                       f"{r['seconds'] / r['unsmoothed_seconds'] - 1.0:>8.0%}{r['timing_seconds']:>10.2f}"
+                       f"{r['unsmoothed_timing_seconds']:>11.2f}{r['duration']:>10.2f}{r['unsmoothed_duration']:>11.2f}"
+                       f"{r['smoothing_checks']:>8}")
+        out += ["", f"the smoothing adds {d['planning_growth_median']:.0%} to the step's planning time (median over the seeds of "
+                f"each seed's ratio; at most {GROWTH_TARGET:.0%} asked): {d['unsmoothed_step_seconds_median']:.2f} -> "
+                f"{d['step_seconds_median']:.2f} s (medians), its timing and sampling {d['unsmoothed_timing_seconds_median']:.2f} "
+                f"-> {d['timing_seconds_median']:.2f} s",
+                f"and shortens the motion by {d['saved_median']:.2f} s (median): {d['unsmoothed_duration_median']:.2f} -> "
+                f"{d['duration_median']:.2f} s, with {d['smoothing_checks_median']:.0f} collision checks (median; "
+                f"{d['checks_per_second_saved']:.0f} per second saved over the seeds: counts, the same on any machine)"]
+        return "\n".join(out)
+
+
+def _median(values: list) -> float:
+    return float(np.median(values)) if values else float("nan")
+
+
+def bench_smoothing(scene: Scene, seeds: int, folder, progress=print, repeat: int = 1,
+                    params: dict | None = None) -> SmoothingBench:
+    """The offline steps once (seed 0, from the cache when there); per seed the online steps, then the motion planned
+    with the smoothing (the motion parameters as `params` set them) and without it (smooth_checks and smooth_attempts
+    0: the pieces timed rest to rest at every vertex), alternately, `repeat` times each, the fastest kept."""
+    params = params or {}
+    made, offline, (graph,) = bench_inputs(scene, folder, progress, params)
+    unsmoothed = replace(made["motion"], smooth_checks=0, smooth_attempts=0)
+    runs = []
+    for seed in range(seeds):
+        results = seed_inputs(scene, made, offline, graph, seed)
+        timed = [(timed_motion(scene, results, made, made["motion"], seed), timed_motion(scene, results, made, unsmoothed, seed))
+                 for _ in range(repeat)]
+        (elapsed, motion, seconds), (bare_elapsed, bare, bare_seconds) = (min((t[k] for t in timed), key=lambda t: t[0])
+                                                                          for k in (0, 1))
+        row = {"seed": seed, "success": not motion.failure and not bare.failure, "failure": motion.failure or bare.failure,
+               "seconds": elapsed, "unsmoothed_seconds": bare_elapsed,
+               "timing_seconds": _timing(motion, seconds), "unsmoothed_timing_seconds": _timing(bare, bare_seconds),
+               "duration": float(motion.duration), "unsmoothed_duration": float(bare.duration),
+               "smoothing_checks": int(sum(p.get("smoothing_checks", 0) for p in motion.phases))}
+        runs.append(row)
+        progress(f"seed {seed}: {elapsed:.2f} s smoothed ({row['duration']:.2f} s of motion), {bare_elapsed:.2f} s without "
+                 f"({row['unsmoothed_duration']:.2f} s)" if row["success"] else f"seed {seed}: {row['failure'][:120]}")
+    return SmoothingBench(list(range(seeds)), runs, repeat)
+
+
+def _timing(motion, seconds: list) -> float:
+    """The seconds of the motion step's timing and sampling (after its phases' transit and contact figures)."""
+    from planner.motion import PHASE_SECONDS
+
+    return float(seconds[len(PHASE_SECONDS) * len(motion.phases)])
