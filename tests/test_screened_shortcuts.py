@@ -140,13 +140,17 @@ def test_a_shortcut_kept_on_a_blind_screen_is_not_in_the_result(tmp_path, monkey
 
 
 class _Counted:
-    """A stand-in validity that counts checks as the real ones bound them: a curve's whole check could make 100 and
-    makes 95, its screen makes 10, the rest over some spans 60 and 28 per share of the curve's time they cover (at most
-    88: never more than the whole); the whole check and the rest fail on the shortcuts `bad(curve)` names, so some
-    shortcuts kept on their screen are refused."""
+    """A stand-in validity that counts checks as the real ones bound them: a ramp's middle is one check, which passes;
+    a curve's whole check could make 100 and makes 95, its screen makes 10, the rest over some spans 60 and 28 per share
+    of the curve's time they cover (at most 88: never more than the whole); the whole check and the rest fail on the
+    shortcuts `bad(curve)` names, so some shortcuts kept on their screen are refused."""
 
     def __init__(self, bad):
         self.checks, self.bad = 0, bad
+
+    def state_valid(self, q) -> bool:
+        self.checks += 1
+        return True
 
     def curve_checks(self, curve) -> int:
         return 100
@@ -162,26 +166,70 @@ class _Counted:
         return not self.bad(curve)
 
 
+def _one_run(monkeypatch, validity):
+    """A smoother of three joints whose every ramp is checked by `validity`, and one run of a random polyline."""
+    from types import SimpleNamespace
+
+    from planner.motion.smoothing import Smoother, _Run
+
+    monkeypatch.setattr(_Run, "validities", lambda self, t1, t2, moves: (validity,))
+    robot = SimpleNamespace(nq=3, hand_idx={"right": np.array([], int)}, spec=SimpleNamespace(arm_names=["right"]))
+    smoother = Smoother(SimpleNamespace(robot=robot), np.ones(3), np.full(3, 2.0), 0.02)
+    path = np.cumsum(np.random.default_rng(3).normal(0, 1, (12, 3)), axis=0)
+    situation = SimpleNamespace(touching=(), support=(), holder=None, pose=np.eye(4))
+    return smoother, [SimpleNamespace(phase=0, part="transit", path=path, situation=situation)]
+
+
+def test_a_ramp_whose_middle_collides_is_refused_after_that_one_check(monkeypatch):
+    """A ramp's middle (half its duration, a configuration the ramp passes through) is checked before its curve's checks
+    are planned: where it collides, the attempt is refused after that single check, no curve check is planned or made,
+    and the run stays timed rest to rest at every vertex."""
+
+    class Middle:
+        checks = 0
+        middles: list = []
+
+        def state_valid(self, q) -> bool:
+            self.checks += 1
+            self.middles.append(np.array(q))
+            return False
+
+        def curve_checks(self, curve) -> int:
+            raise AssertionError("a curve's checks were planned past its colliding middle")
+
+        def curve_valid(self, *args, **kwargs) -> bool:
+            raise AssertionError("a curve was checked past its colliding middle")
+
+    validity = Middle()
+    smoother, pieces = _one_run(monkeypatch, validity)
+    tried = []
+    def recorded(*args, **kwargs):
+        out = ramp(*args, **kwargs)
+        if out is not None:
+            tried.append(out)
+        return out
+
+    monkeypatch.setattr("planner.motion.smoothing.ramp", recorded)
+    run = smoother.smooth(pieces, np.random.default_rng(7), 400, 4000)
+    assert run.shortcuts == 0 and 0 < run.checks == validity.checks == len(tried)
+    for shortcut, middle in zip(tried, validity.middles):  # each check was of its ramp's middle
+        assert np.allclose(shortcut.positions(np.array([shortcut.duration / 2]))[0], middle)
+    assert np.allclose(run.trajectory.q, rest_to_rest(pieces[0].path, np.ones(3), np.full(3, 2.0)).q)
+
+
 @pytest.mark.parametrize("budget", [300, 700, 1500, 4000])
 def test_the_checks_held_back_keep_every_smoothing_within_its_budget(budget, monkeypatch):
     """A run of one random polyline smoothed with the stand-in validity (a shortcut in five fails the rest of its
     checks): every check made, screens, the rest of the kept shortcuts' checks (made early when what is held back
     leaves too little), and those of the smoothings taken again after a refusal, stays within the budget; what the
     result keeps of each shortcut passed; one seed, one result."""
-    from types import SimpleNamespace
-
-    from planner.motion.smoothing import Smoother, _Run
+    from planner.motion.smoothing import _Run
 
     def bad(curve) -> bool:
         return int(curve.duration * 1e6) % 5 == 0
 
     validity = _Counted(bad)
-    monkeypatch.setattr(_Run, "validities", lambda self, t1, t2, moves: (validity,))
-    robot = SimpleNamespace(nq=3, hand_idx={"right": np.array([], int)}, spec=SimpleNamespace(arm_names=["right"]))
-    smoother = Smoother(SimpleNamespace(robot=robot), np.ones(3), np.full(3, 2.0), 0.02)
-    path = np.cumsum(np.random.default_rng(3).normal(0, 1, (12, 3)), axis=0)
-    situation = SimpleNamespace(touching=(), support=(), holder=None, pose=np.eye(4))
-    pieces = [SimpleNamespace(phase=0, part="transit", path=path, situation=situation)]
+    smoother, pieces = _one_run(monkeypatch, validity)
     made = []
     init = _Run.__init__
 

@@ -5,7 +5,8 @@ object or lets go of it, the object is lifted off or set down, the object's situ
 ends; fingers shaping before an approach, or opening at the end, may move while the arms do. A run starts
 timed rest to rest at every vertex (trajectory.py): exactly the checked polylines. Then, drawn from the plan's
 random stream, two times t1 < t2 of the run are joined by the time-optimal ramp between the states (positions and
-velocities) there (ramps.py); where it is faster and its curve passes a screen (its first checks: segments.py), it
+velocities) there (ramps.py); where it is faster, its middle configuration is free (one check, before any of its curve's
+checks is planned: most ramps that fail, fail there) and its curve passes a screen (its first checks: segments.py), it
 replaces that span, and the rest of its checks are made at the end, where it survives later shortcuts (tentative.py:
 the same displacement bound between checks as a straight segment; should one fail, that attempt is refused and the
 run smoothed again, the attempts before it replayed, the new ones checked whole). Inside one piece it is checked with that
@@ -291,9 +292,11 @@ class _Run:
         return self.budget - self.spent - self.survivors.reserved
 
     def _try(self, t1: float, t2: float) -> Outcome:
-        """A new attempt (see attempt). A ramp is screened while the budget has left what its screen and its whole
-        check could need (the surviving shortcuts' checks made at once first, should what they hold back leave less);
-        else it is checked whole, as far as its whole check fits, else not tried."""
+        """A new attempt (see attempt). A ramp's middle is checked first, while the budget has room for it: a ramp through
+        a colliding configuration is refused before its curve's checks are planned. Then it is screened while the budget
+        has left what its screen and its whole check could need (the surviving shortcuts' checks made at once first,
+        should what they hold back leave less); else it is checked whole, as far as its whole check fits, else not
+        tried."""
         p, refused = self.smoother, Outcome((t1, t2))
         if t2 - t1 <= p.min_gain:
             return refused
@@ -302,8 +305,15 @@ class _Run:
         if shortcut is None:
             return refused
         validities = self.validities(t1, t2, np.any(shortcut.v != 0, axis=0) | np.any(shortcut.a != 0, axis=0))
-        if validities is None:
+        if validities is None or len(validities) > self._left():
             return refused
+        middle = shortcut.positions(np.array([0.5 * shortcut.duration]))[0]  # on the ramp: a collision there refuses it
+        before = sum(v.checks for v in validities)
+        clear = all(v.state_valid(middle) for v in validities)
+        first = sum(v.checks for v in validities) - before
+        self.spent += first
+        if not clear:
+            return Outcome((t1, t2), None, validities, first, 0, True)
         most = sum(v.curve_checks(shortcut) for v in validities)
         if 2 * most > self._left() and self.survivors.reserved:  # what is held back is far more than the checks need
             failed = self.settle()
@@ -320,4 +330,4 @@ class _Run:
             if not valid:
                 break
         self.spent += checks
-        return Outcome((t1, t2), shortcut if valid else None, validities, checks, most, whole)
+        return Outcome((t1, t2), shortcut if valid else None, validities, first + checks, most, whole)
