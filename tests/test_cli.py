@@ -9,6 +9,7 @@ import re
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import sandbox
@@ -79,15 +80,22 @@ def test_bench_collision_json(tmp_path):
     assert "median µs" in run.stdout
 
 
-@pytest.mark.slow  # about 20 s from an empty cache: grasp lists, two 4-node roadmaps, three motions
-def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
-    out = tmp_path / "motion.json"
-    small = ("roadmap.nodes=4", "roadmap.task_nodes=0", "pick_grasps.orientations=16", "place_grasps.orientations=16",
-             "motion.smooth_checks=2000")
-    run = sandbox.regrasp("bench", "motion", "--seeds", "1", "--roadmaps", "2", *(a for s in small for a in ("--set", s)),
+SMALL_BENCH = ("roadmap.nodes=4", "roadmap.task_nodes=0", "pick_grasps.orientations=16", "place_grasps.orientations=16",
+               "motion.smooth_checks=2000")  # a motion benchmark's inputs made in seconds
+
+
+def _small_bench(tmp_path: Path, *args: str) -> tuple:
+    """(the run, its JSON figures) of `regrasp bench ARGS` on one seed with SMALL_BENCH's settings, from an empty cache."""
+    out = tmp_path / "bench.json"
+    run = sandbox.regrasp("bench", *args, "--seeds", "1", *(a for s in SMALL_BENCH for a in ("--set", s)),
                           "--json", str(out), REGRASP_CACHE=str(tmp_path / "cache"))
     assert run.returncode == 0, run.stderr
-    figures = json.loads(out.read_text())
+    return run, json.loads(out.read_text())
+
+
+@pytest.mark.slow  # about 20 s from an empty cache: grasp lists, two 4-node roadmaps, three motions
+def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
+    run, figures = _small_bench(tmp_path, "motion", "--roadmaps", "2")
     assert figures["roadmaps"] == 2 and [r["roadmap"] for r in figures["per_roadmap"]] == [0, 1]
     assert [(r["seed"], r["roadmap"]) for r in figures["runs"]["roadmap"]] == [(0, 0), (0, 1)]
     assert [(r["seed"], r["roadmap"]) for r in figures["runs"]["rrt"]] == [(0, None)]
@@ -104,13 +112,7 @@ def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
 
 @pytest.mark.slow  # about 15 s from an empty cache: grasp lists, a 4-node roadmap, two motions
 def test_bench_smoothing_from_an_empty_cache(tmp_path):
-    out = tmp_path / "smoothing.json"
-    small = ("roadmap.nodes=4", "roadmap.task_nodes=0", "pick_grasps.orientations=16", "place_grasps.orientations=16",
-             "motion.smooth_checks=2000")
-    run = sandbox.regrasp("bench", "smoothing", "--seeds", "1", "--repeat", "1", *(a for s in small for a in ("--set", s)),
-                          "--json", str(out), REGRASP_CACHE=str(tmp_path / "cache"))
-    assert run.returncode == 0, run.stderr
-    figures = json.loads(out.read_text())
+    run, figures = _small_bench(tmp_path, "smoothing", "--repeat", "1")
     (row,) = figures["runs"]
     assert row["seed"] == 0 and row["success"] and figures["success"] == 1.0
     assert 0 < row["smoothing_checks"] <= 2000  # --set reached the smoothed run (24,000 by default)
