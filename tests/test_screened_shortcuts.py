@@ -166,6 +166,11 @@ class _Counted:
         return not self.bad(curve)
 
 
+def _replayed(run):
+    """The attempts of a smoothing that replayed an outcome of the one before (the same object, not made anew)."""
+    return (out for out, before in zip(run.log, run.record) if out is before)
+
+
 def _one_run(monkeypatch, validity):
     """A smoother of three joints whose every ramp is checked by `validity`, and one run of a random polyline."""
     from types import SimpleNamespace
@@ -248,6 +253,11 @@ def test_the_checks_held_back_keep_every_smoothing_within_its_budget(budget, mon
         results.append((run, len(made)))
     (run, smoothings), (again, _) = results
     assert np.array_equal(run.trajectory.q, again.trajectory.q) and run.checks == again.checks
+    # per pass: the shortcuts kept are the run's, the seconds they saved its time rest to rest less its duration, and
+    # every attempt made anew is counted once (the replays of a smoothing taken again are not)
+    assert sum(run.kept) == run.shortcuts and all(0 <= k <= a for k, a in zip(run.kept, run.attempts))
+    assert abs(sum(run.saved) - (smoother.rest_to_rest(pieces) - run.trajectory.duration)) < 1e-9
+    assert sum(run.attempts) == sum(len(r.log) - sum(1 for _ in _replayed(r)) for r in made)
     if budget >= 1500:
         assert smoothings > 1, "no kept shortcut was refused: the case shows nothing"
         assert run.shortcuts > 0 and run.trajectory.duration < smoother.rest_to_rest(pieces)

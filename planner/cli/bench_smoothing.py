@@ -8,6 +8,7 @@ import numpy as np
 
 from planner.cli.bench_motion import bench_inputs, seed_inputs, timed_motion
 from planner.model.task import Scene
+from planner.motion.smoothing import PASSES
 
 GROWTH_TARGET = 0.20  # the planning time the smoothing may add, as a share of the step planned without it (issue 34)
 
@@ -18,7 +19,8 @@ class SmoothingBench:
 
     seeds: list
     runs: list  # per seed: {"seed", "success", "seconds", "unsmoothed_seconds", "timing_seconds", "unsmoothed_timing_seconds",
-    #              "duration", "unsmoothed_duration", "smoothing_checks"}
+    #              "duration", "unsmoothed_duration", "smoothing_checks", and per pass (PASSES) "smoothing_attempts",
+    #              "smoothing_kept", "smoothing_saved"}
     repeat: int = 1  # runs per seed and setting, the fastest kept
 
     def to_dict(self) -> dict:
@@ -35,7 +37,14 @@ class SmoothingBench:
                 "duration_median": _median([r["duration"] for r in ok]),
                 "unsmoothed_duration_median": _median([r["unsmoothed_duration"] for r in ok]),
                 "saved_median": _median(saved), "smoothing_checks_median": _median([r["smoothing_checks"] for r in ok]),
-                "checks_per_second_saved": checks / sum(saved) if sum(saved) > 0 else float("nan"), "runs": self.runs}
+                "checks_per_second_saved": checks / sum(saved) if sum(saved) > 0 else float("nan"),
+                "passes": self.passes(), "runs": self.runs}
+
+    def passes(self) -> dict:
+        """Per pass of the smoothing, summed over the seeds that moved: shortcuts attempted anew, kept, seconds saved."""
+        ok = [r for r in self.runs if r["success"]]
+        return {name: {"attempts": sum(r["smoothing_attempts"][k] for r in ok), "kept": sum(r["smoothing_kept"][k] for r in ok),
+                       "saved": sum(r["smoothing_saved"][k] for r in ok)} for k, name in enumerate(PASSES)}
 
     def render(self) -> str:
         d = self.to_dict()
@@ -57,7 +66,12 @@ class SmoothingBench:
                 f"-> {d['timing_seconds_median']:.2f} s",
                 f"and shortens the motion by {d['saved_median']:.2f} s (median): {d['unsmoothed_duration_median']:.2f} -> "
                 f"{d['duration_median']:.2f} s, with {d['smoothing_checks_median']:.0f} collision checks (median; "
-                f"{d['checks_per_second_saved']:.0f} per second saved over the seeds: counts, the same on any machine)"]
+                f"{d['checks_per_second_saved']:.0f} per second saved over the seeds: counts, the same on any machine)",
+                "", "per pass, summed over the seeds (counts):", f"{'pass':<10}{'attempts':>9}{'kept':>6}{'saved s':>9}"
+                f"{'attempts per s saved':>22}"]
+        for name, row in d["passes"].items():
+            per = f"{row['attempts'] / row['saved']:.0f}" if row["saved"] > 0 else "-"
+            out.append(f"{name:<10}{row['attempts']:>9}{row['kept']:>6}{row['saved']:>9.2f}{per:>22}")
         return "\n".join(out)
 
 
@@ -84,7 +98,9 @@ def bench_smoothing(scene: Scene, seeds: int, folder, progress=print, repeat: in
                "seconds": elapsed, "unsmoothed_seconds": bare_elapsed,
                "timing_seconds": _timing(motion, seconds), "unsmoothed_timing_seconds": _timing(bare, bare_seconds),
                "duration": float(motion.duration), "unsmoothed_duration": float(bare.duration),
-               "smoothing_checks": int(sum(p.get("smoothing_checks", 0) for p in motion.phases))}
+               "smoothing_checks": int(sum(p.get("smoothing_checks", 0) for p in motion.phases)),
+               **{key: [sum(p.get(key, [0] * len(PASSES))[k] for p in motion.phases) for k in range(len(PASSES))]
+                  for key in ("smoothing_attempts", "smoothing_kept", "smoothing_saved")}}
         runs.append(row)
         progress(f"seed {seed}: {elapsed:.2f} s smoothed ({row['duration']:.2f} s of motion), {bare_elapsed:.2f} s without "
                  f"({row['unsmoothed_duration']:.2f} s)" if row["success"] else f"seed {seed}: {row['failure'][:120]}")

@@ -21,7 +21,8 @@ from planner.motion.smoothing import Smoother, runs
 @dataclass
 class Sampled:
     """Configurations after the first, with their velocities and accelerations, the index into `pieces` of each one's
-    piece, and the smoothing's figures per run (its first piece's phase, collision checks, shortcuts kept)."""
+    piece, and the smoothing's figures per run (its first piece's phase and its SmoothedRun: checks, shortcuts kept,
+    and per pass attempts, shortcuts kept and seconds saved)."""
 
     q: list = field(default_factory=list)
     v: list = field(default_factory=list)
@@ -63,5 +64,5 @@ def sample(pieces: list[Piece], smoother: Smoother, rng: np.random.Generator, dt
             out.start_a = traj.accelerations(np.zeros(1))
         out.owner += (owner + len(out.pieces)).tolist()
         out.pieces += smoothed.pieces
-        out.figures.append((smoothed.pieces[0].phase, smoothed.checks, smoothed.shortcuts))
+        out.figures.append((smoothed.pieces[0].phase, smoothed))
     return out

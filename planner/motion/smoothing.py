@@ -33,6 +33,7 @@ LEAVING, REACHING = ("lift", "retreat"), ("approach", "set-down")  # contact mot
 CORNERS = (0.5, 0.25, 0.1)  # a vertex's corner cut spans this share of the segments before and after it, tried in turn
 RESTS = ("closing", "opening")  # a hand closes on the object or lets go of it: the robot rests before and after
 CHUNK = 256  # random shortcuts judged at once, the most promising attempted first
+PASSES = ("vertices", "corners", "random")  # the passes of `passes`, in their order
 
 
 def runs(pieces: list[Piece]) -> list[list[Piece]]:
@@ -55,13 +56,18 @@ def runs(pieces: list[Piece]) -> list[list[Piece]]:
 @dataclass(frozen=True)
 class SmoothedRun:
     """A run's trajectory and the times its pieces end at (each shortcut maps a piece boundary it spans in
-    proportion), with the collision checks and shortcuts its smoothing made."""
+    proportion), with the collision checks and shortcuts its smoothing made; per pass (PASSES), the shortcuts it
+    attempted anew (in every smoothing of the run: replays not counted), those the result kept and the seconds they
+    saved (summed: the run's time rest to rest at every vertex less its duration)."""
 
     pieces: list
     trajectory: Trajectory
     ends: np.ndarray
     checks: int
     shortcuts: int
+    attempts: tuple = (0,) * len(PASSES)
+    kept: tuple = (0,) * len(PASSES)
+    saved: tuple = (0.0,) * len(PASSES)
 
 
 class Smoother:
@@ -121,7 +127,7 @@ class Smoother:
         start = ([p for p, _ in timed], Trajectory.joined([t for _, t in timed]), np.cumsum([t.duration for _, t in timed]))
         record: list[Outcome] = []
         checked: dict[int, list[tuple[float, float]]] = {}
-        spent = 0
+        spent, made = 0, np.zeros(len(PASSES), dtype=int)
         while True:
             run = _Run(self, *start, budget, record, Survivors(checked), spent, eager=bool(record))
             try:
@@ -129,9 +135,10 @@ class Smoother:
                 failed = run.settle()
             except Retake as retake:
                 failed = retake.seq
-            spent = run.spent
+            spent, made = run.spent, made + run.made
             if failed is None:
-                return SmoothedRun(run.pieces, run.traj, run.ends, spent, run.shortcuts)
+                return SmoothedRun(run.pieces, run.traj, run.ends, spent, run.shortcuts, tuple(made.tolist()),
+                                   tuple(run.kept.tolist()), tuple(run.saved.tolist()))
             record = run.log[:failed] + [Outcome(run.log[failed].times)]
             checked = {seq: spans for seq, spans in checked.items() if seq < failed}
 
@@ -143,6 +150,7 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
     stop left where one is valid); between random times (`draws`, shares of the duration). Each pass stops once the
     run's checks reach its budget, and no ramp is tried whose whole check needs more checks than the budget has left."""
     budget = run.budget
+    run.current = 0
     run.marks = np.array([0.0] + [float(t) for t, v in zip(run.traj.t[1:-1], run.traj.v[1:]) if not v.any()]
                          + [run.traj.duration])  # the vertices, where the robot rests
     i = 0
@@ -151,6 +159,7 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
         if j is not None:
             run.marks = np.delete(run.marks, np.arange(i + 1, j))
         i += 1
+    run.current = 1
     for k in range(1, len(run.marks) - 1):
         for part in CORNERS:  # a corner cut nearer the vertex leaves the checked path less: more likely valid
             if run.checks >= budget:
@@ -158,6 +167,7 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
             m = run.marks
             if run.attempt(m[k] - part * (m[k] - m[k - 1]), m[k] + part * (m[k + 1] - m[k])):
                 break
+    run.current = 2
     k = run.next_draw(draws)
     while k is not None and run.checks < budget:
         if run.attempt(*np.sort(draws[k] * run.traj.duration)):
@@ -193,6 +203,9 @@ class _Run:
         self.strict = next((p.situation for p in pieces if not p.situation.touching and not p.situation.support),
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.shortcuts = 0
+        self.current = 0  # the pass attempting (an index of PASSES); per pass, this smoothing's attempts made anew, the
+        self.made = np.zeros(len(PASSES), dtype=int)  # shortcuts kept and the seconds they saved
+        self.kept, self.saved = np.zeros(len(PASSES), dtype=int), np.zeros(len(PASSES))
         self.marks = np.zeros(0)
         self.drawn = 0  # the random pass: the draws its chunks have taken so far,
         self.pending: np.ndarray | None = None  # the chunk's draws not attempted yet,
@@ -262,6 +275,7 @@ class _Run:
         if out is None or (out.shortcut is not None and not out.whole and out.most > self._left()):  # no longer a replay
             self.record = self.record[:seq]
             out = self._try(t1, t2)
+            self.made[self.current] += 1
         self.log.append(out)
         self.screens += out.checks
         if out.shortcut is None:
@@ -269,6 +283,8 @@ class _Run:
         self.shortcuts += 1
         shortcut = out.shortcut
         gain = t2 - t1 - shortcut.duration
+        self.kept[self.current] += 1
+        self.saved[self.current] += gain
 
         def mapped(times: np.ndarray) -> np.ndarray:
             inside = (times > t1) & (times < t2)

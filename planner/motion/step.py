@@ -30,7 +30,7 @@ from planner.motion.phase import Phase
 from planner.motion.piece import TRANSIT_PARTS, Piece
 from planner.motion.result import PHASES, TABLE_PHASES, Motion, MotionParams
 from planner.motion.sampling import sample
-from planner.motion.smoothing import Smoother
+from planner.motion.smoothing import PASSES, Smoother
 from planner.motion.strategies import Attempt
 from planner.motion.validities import Validities
 from planner.regrasp.placements import Placements
@@ -141,7 +141,7 @@ def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, 
     dt = 1.0 / p.rate
     t = np.arange(len(q)) * dt
     table = [_phase_row(i, planner.stats[i], q, phase_arr, dt, [pc for pc in pieces if pc.phase == i],
-                        sum(c for ph, c, _ in out.figures if ph == i), name) for i, name in enumerate(names)]
+                        [run for ph, run in out.figures if ph == i], name) for i, name in enumerate(names)]
     stages = []
     for row in table:
         stages += [{"stage": f"{row['phase']}: transit planning", "count": row["nodes_planning"], "note": f"{row['searches']} searches"},
@@ -152,7 +152,7 @@ def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, 
                    {"stage": f"{row['phase']}: approach, fingers, lift", "count": 0,
                     "note": f"path {row['path_length']:.2f} rad, {row['duration']:.2f} s"}]
     stages.append({"stage": "timing and sampling", "count": len(q),
-                   "note": f"{sum(k for _, _, k in out.figures)} parabolic shortcuts, samples at {p.rate:g} Hz"})
+                   "note": f"{sum(run.shortcuts for _, run in out.figures)} parabolic shortcuts, samples at {p.rate:g} Hz"})
     stages += attempt.stages  # after Table I's, whose seconds the workbench reads by position
     intermediate = () if attempt.intermediate is None else tuple(tuple(float(x) for x in row) for row in attempt.intermediate)
     return Motion(p.planner, attempt.used, attempt.tried, table, arms, resolution, stages, "", t, q, phase_arr, np.array(poses),
@@ -160,16 +160,21 @@ def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, 
                   tuple(robot.joint_names()), names, attempt.strategy, alternatives, intermediate, tuple(attempt.sequence), qd, qdd)
 
 
-def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: list[Piece], smoothing_checks: int, name: str) -> dict:
+def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: list[Piece], smoothed: list, name: str) -> dict:
     """Table I's row of phase i: the transit figures, the phase's sampled path length, straight distance and duration,
-    and its transits' geometric length against the straight distance between their ends (before timing)."""
+    its transits' geometric length against the straight distance between their ends (before timing), and the smoothing
+    of the runs that start in it (`smoothed`: their SmoothedRun): checks, and per pass (smoothing.PASSES) the shortcuts
+    attempted, kept and the seconds they saved."""
     sel = np.flatnonzero(phase == i)
     seg = q[sel[0] - 1 if sel[0] else 0: sel[-1] + 1] if len(sel) else q[:0]
     transits = [pc.path for pc in pieces if pc.part in TRANSIT_PARTS]
     return {"phase": name, "nodes_planning": st.nodes_planning, "nodes_validating": st.nodes_validating,
             "edges_invalidated": st.edges_invalidated, "rrt_calls": st.rrt_calls, "searches": st.searches,
             "transit_checks": st.checks, "transit_pair_tests": st.pair_tests, "transit_pair_tests_rrt": st.pairs_rrt,
-            "transit_pair_tests_shortcut": st.pairs_shortcut, "smoothing_checks": smoothing_checks,
+            "transit_pair_tests_shortcut": st.pairs_shortcut, "smoothing_checks": sum(r.checks for r in smoothed),
+            "smoothing_attempts": [int(sum(r.attempts[k] for r in smoothed)) for k in range(len(PASSES))],
+            "smoothing_kept": [int(sum(r.kept[k] for r in smoothed)) for k in range(len(PASSES))],
+            "smoothing_saved": [round(float(sum(r.saved[k] for r in smoothed)), 4) for k in range(len(PASSES))],
             "path_length": round(float(np.linalg.norm(np.diff(seg, axis=0), axis=1).sum()), 4),
             "straight_distance": round(float(np.linalg.norm(seg[-1] - seg[0])), 4) if len(seg) else 0.0,
             "transit_length": round(float(sum(np.linalg.norm(np.diff(x, axis=0), axis=1).sum() for x in transits)), 4),
