@@ -31,6 +31,7 @@ from planner.motion.validities import Validities
 
 LEAVING, REACHING = ("lift", "retreat"), ("approach", "set-down")  # contact motions starting / ending at the object
 CORNERS = (0.5, 0.25, 0.1)  # a vertex's corner cut spans this share of the segments before and after it, tried in turn
+CORNER_ROUNDS = 2  # rounds of corner cuts: the second, between the first's ramps, joins them (docs/benchmarks.md)
 RESTS = ("closing", "opening")  # a hand closes on the object or lets go of it: the robot rests before and after
 CHUNK = 256  # random shortcuts judged at once, the most promising attempted first
 PASSES = ("vertices", "corners", "random")  # the passes of `passes`, in their order
@@ -147,7 +148,8 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
     """A run shortened in three passes: from the first vertex to the farthest it reaches by a rest-to-rest ramp, and
     on from there (the path's big detours, each ramp tried once); around each vertex left (from halfway along the
     segment before to halfway along the one after, else a quarter, a tenth of the way: short ramps, few checks, no
-    stop left where one is valid); between random times (`draws`, shares of the duration). Each pass stops once the
+    stop left where one is valid; CORNER_ROUNDS times, a later round joining the ramps an earlier one cut); between
+    random times (`draws`, shares of the duration). Each pass stops once the
     run's checks reach its budget, and no ramp is tried whose whole check needs more checks than the budget has left."""
     budget = run.budget
     run.current = 0
@@ -160,7 +162,7 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
             run.marks = np.delete(run.marks, np.arange(i + 1, j))
         i += 1
     run.current = 1
-    for k in range(1, len(run.marks) - 1):
+    for k in [k for _ in range(CORNER_ROUNDS) for k in range(1, len(run.marks) - 1)]:
         for part in CORNERS:  # a corner cut nearer the vertex leaves the checked path less: more likely valid
             if run.checks >= budget:
                 break
