@@ -149,8 +149,8 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
     on from there (the path's big detours, each ramp tried once); around each vertex left (from halfway along the
     segment before to halfway along the one after, else a quarter, a tenth of the way: short ramps, few checks, no
     stop left where one is valid; CORNER_ROUNDS times, a later round joining the ramps an earlier one cut); between
-    random times (`draws`, shares of the duration). Each pass stops once the
-    run's checks reach its budget, and no ramp is tried whose whole check needs more checks than the budget has left."""
+    random times (`draws`, shares of the duration). Each pass stops once the run's checks reach its budget, and no
+    ramp is tried whose whole check needs more checks than the budget has left."""
     budget = run.budget
     run.current = 0
     run.marks = np.array([0.0] + [float(t) for t, v in zip(run.traj.t[1:-1], run.traj.v[1:]) if not v.any()]
@@ -205,9 +205,9 @@ class _Run:
         self.strict = next((p.situation for p in pieces if not p.situation.touching and not p.situation.support),
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.shortcuts = 0
-        self.current = 0  # the pass attempting (an index of PASSES); per pass, this smoothing's attempts made anew, the
-        self.made = np.zeros(len(PASSES), dtype=int)  # shortcuts kept and the seconds they saved
-        self.kept, self.saved = np.zeros(len(PASSES), dtype=int), np.zeros(len(PASSES))
+        self.current = 0  # the pass attempting (an index of PASSES)
+        self.made = np.zeros(len(PASSES), dtype=int)  # per pass: this smoothing's attempts made anew,
+        self.kept, self.saved = np.zeros(len(PASSES), dtype=int), np.zeros(len(PASSES))  # shortcuts kept, seconds saved
         self.marks = np.zeros(0)
         self.drawn = 0  # the random pass: the draws its chunks have taken so far,
         self.pending: np.ndarray | None = None  # the chunk's draws not attempted yet,
