@@ -53,27 +53,27 @@ class MotionBench:
             ok = [r for r in runs if r["phases_done"] > i]
             rows = [r["phases"][i] for r in runs if r["phases"]]
             phases.append({"phase": name, "success": len(ok) / len(runs),
-                           "nodes_planning": _median([r["nodes_planning"] for r in rows]),
-                           "nodes_validating": _median([r["nodes_validating"] for r in rows]),
-                           "seconds_planning": _median([r["phase_seconds"][per * i] for r in runs if r["phases"]]),
-                           "seconds_validating": _median([r["phase_seconds"][per * i + 1] for r in runs if r["phases"]]),
-                           "seconds_reconnecting": _median([r["phase_seconds"][per * i + 2] for r in runs if r["phases"]]),
-                           "seconds": _median([sum(r["phase_seconds"][per * i: per * (i + 1)]) for r in runs if r["phases"]]),
-                           "edges_invalidated": _median([r["edges_invalidated"] for r in rows]),
-                           "rrt_calls": _median([r["rrt_calls"] for r in rows]),
-                           "transit_checks": _median([r["transit_checks"] for r in rows]),
-                           "pair_tests": _median([r.get("transit_pair_tests", 0) for r in rows]),
-                           "smoothing_checks": _median([r.get("smoothing_checks", 0) for r in rows]),
-                           "path_length": _median([r["path_length"] for r in rows]),
-                           "straight_distance": _median([r.get("straight_distance", np.nan) for r in rows]),
-                           "duration": _median([r["duration"] for r in rows])})
-        return {"seconds": _median([r["seconds"] for r in runs]), "success": sum(r["success"] for r in runs) / len(runs),
-                "transit_seconds": _median([_transit_seconds(r) for r in runs if r["phases"]]),
-                "pair_tests": _median([_pair_tests(r) for r in runs if r["phases"]]),
-                "duration": _median([sum(p["duration"] for p in r["phases"]) for r in runs if r["success"]]),
-                "transit_checks": _median([_transit_checks(r) for r in runs if r["phases"]]),
-                "pair_parts": {k: _median([_pair_parts(r)[k] for r in runs if r["phases"]]) for k in PAIR_PARTS},
-                "untransit_seconds": _median([r["seconds"] - _transit_seconds(r) for r in runs if r["phases"]]),
+                           "nodes_planning": median([r["nodes_planning"] for r in rows]),
+                           "nodes_validating": median([r["nodes_validating"] for r in rows]),
+                           "seconds_planning": median([r["phase_seconds"][per * i] for r in runs if r["phases"]]),
+                           "seconds_validating": median([r["phase_seconds"][per * i + 1] for r in runs if r["phases"]]),
+                           "seconds_reconnecting": median([r["phase_seconds"][per * i + 2] for r in runs if r["phases"]]),
+                           "seconds": median([sum(r["phase_seconds"][per * i: per * (i + 1)]) for r in runs if r["phases"]]),
+                           "edges_invalidated": median([r["edges_invalidated"] for r in rows]),
+                           "rrt_calls": median([r["rrt_calls"] for r in rows]),
+                           "transit_checks": median([r["transit_checks"] for r in rows]),
+                           "pair_tests": median([r.get("transit_pair_tests", 0) for r in rows]),
+                           "smoothing_checks": median([r.get("smoothing_checks", 0) for r in rows]),
+                           "path_length": median([r["path_length"] for r in rows]),
+                           "straight_distance": median([r.get("straight_distance", np.nan) for r in rows]),
+                           "duration": median([r["duration"] for r in rows])})
+        return {"seconds": median([r["seconds"] for r in runs]), "success": sum(r["success"] for r in runs) / len(runs),
+                "transit_seconds": median([_transit_seconds(r) for r in runs if r["phases"]]),
+                "pair_tests": median([_pair_tests(r) for r in runs if r["phases"]]),
+                "duration": median([sum(p["duration"] for p in r["phases"]) for r in runs if r["success"]]),
+                "transit_checks": median([_transit_checks(r) for r in runs if r["phases"]]),
+                "pair_parts": {k: median([_pair_parts(r)[k] for r in runs if r["phases"]]) for k in PAIR_PARTS},
+                "untransit_seconds": median([r["seconds"] - _transit_seconds(r) for r in runs if r["phases"]]),
                 "phases": phases, "where": self.where(planner)}
 
     def transit_speedup(self) -> float | None:
@@ -81,7 +81,7 @@ class MotionBench:
         (a ratio per run: the two ran in the same minutes, so a busy minute slows both)."""
         ratios = [_transit_seconds(b) / _transit_seconds(a) for a, b in self._pairs()
                   if a["phases"] and b["phases"] and _transit_seconds(a) > 0]
-        return _median(ratios) if ratios else None
+        return median(ratios) if ratios else None
 
     def totals(self) -> dict:
         """Sums over ours' runs and RRTConnect's run of the same seed (once per run of ours): transit pair tests and the
@@ -112,9 +112,9 @@ class MotionBench:
         out = []
         for r in range(self.roadmaps):
             runs = [a for a in self.runs["roadmap"] if a.get("roadmap", 0) == r]
-            out.append({"roadmap": r, "pair_tests": _median([_pair_tests(a) for a in runs if a["phases"]]),
-                        "transit_seconds": _median([_transit_seconds(a) for a in runs if a["phases"]]),
-                        "duration": _median([sum(p["duration"] for p in a["phases"]) for a in runs if a["success"]]),
+            out.append({"roadmap": r, "pair_tests": median([_pair_tests(a) for a in runs if a["phases"]]),
+                        "transit_seconds": median([_transit_seconds(a) for a in runs if a["phases"]]),
+                        "duration": median([sum(p["duration"] for p in a["phases"]) for a in runs if a["success"]]),
                         "success": sum(a["success"] for a in runs) / len(runs) if runs else float("nan")})
         return out
 
@@ -134,7 +134,7 @@ class MotionBench:
                 rows[kind].append(sum(sec[per * i + j] for i in range(n)))
             rows["timing and sampling"].append(sec[per * n])  # after it, the sequence search's stages (wall time, overlapping)
             rows["other"].append(r["seconds"] - sum(sec[: per * n + 1]))
-        return {k: _median(v) for k, v in rows.items()}
+        return {k: median(v) for k, v in rows.items()}
 
     def render(self) -> str:
         out = []
@@ -245,7 +245,7 @@ def _ratio(a: float, b: float) -> float:
     return a / b if b > 0 else float("nan")
 
 
-def _median(values: list) -> float:
+def median(values: list) -> float:
     return float(np.median(values)) if values else float("nan")
 
 

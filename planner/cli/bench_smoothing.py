@@ -4,9 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import numpy as np
-
-from planner.cli.bench_motion import bench_inputs, seed_inputs, timed_motion
+from planner.cli.bench_motion import bench_inputs, median, seed_inputs, timed_motion
 from planner.model.task import Scene
 from planner.motion.smoothing import PASSES
 
@@ -23,26 +21,30 @@ class SmoothingBench:
     #              "smoothing_kept", "smoothing_saved"}
     repeat: int = 1  # runs per seed and setting, the fastest kept
 
+    def moved(self) -> list:
+        """The seeds' records whose motion was planned with and without the smoothing."""
+        return [r for r in self.runs if r["success"]]
+
     def to_dict(self) -> dict:
-        ok = [r for r in self.runs if r["success"]]
+        ok = self.moved()
         growth = [r["seconds"] / r["unsmoothed_seconds"] - 1.0 for r in ok if r["unsmoothed_seconds"] > 0]
         saved = [r["unsmoothed_duration"] - r["duration"] for r in ok]
         checks = sum(r["smoothing_checks"] for r in ok)
         return {"seeds": self.seeds, "repeat": self.repeat, "success": len(ok) / len(self.runs) if self.runs else float("nan"),
-                "step_seconds_median": _median([r["seconds"] for r in ok]),
-                "unsmoothed_step_seconds_median": _median([r["unsmoothed_seconds"] for r in ok]),
-                "planning_growth_median": _median(growth), "growth_target": GROWTH_TARGET,
-                "timing_seconds_median": _median([r["timing_seconds"] for r in ok]),
-                "unsmoothed_timing_seconds_median": _median([r["unsmoothed_timing_seconds"] for r in ok]),
-                "duration_median": _median([r["duration"] for r in ok]),
-                "unsmoothed_duration_median": _median([r["unsmoothed_duration"] for r in ok]),
-                "saved_median": _median(saved), "smoothing_checks_median": _median([r["smoothing_checks"] for r in ok]),
+                "step_seconds_median": median([r["seconds"] for r in ok]),
+                "unsmoothed_step_seconds_median": median([r["unsmoothed_seconds"] for r in ok]),
+                "planning_growth_median": median(growth), "growth_target": GROWTH_TARGET,
+                "timing_seconds_median": median([r["timing_seconds"] for r in ok]),
+                "unsmoothed_timing_seconds_median": median([r["unsmoothed_timing_seconds"] for r in ok]),
+                "duration_median": median([r["duration"] for r in ok]),
+                "unsmoothed_duration_median": median([r["unsmoothed_duration"] for r in ok]),
+                "saved_median": median(saved), "smoothing_checks_median": median([r["smoothing_checks"] for r in ok]),
                 "checks_per_second_saved": checks / sum(saved) if sum(saved) > 0 else float("nan"),
                 "passes": self.passes(), "runs": self.runs}
 
     def passes(self) -> dict:
         """Per pass of the smoothing, summed over the seeds that moved: shortcuts attempted anew, kept, seconds saved."""
-        ok = [r for r in self.runs if r["success"]]
+        ok = self.moved()
         return {name: {"attempts": sum(r["smoothing_attempts"][k] for r in ok), "kept": sum(r["smoothing_kept"][k] for r in ok),
                        "saved": sum(r["smoothing_saved"][k] for r in ok)} for k, name in enumerate(PASSES)}
 
@@ -73,10 +75,6 @@ class SmoothingBench:
             per = f"{row['attempts'] / row['saved']:.0f}" if row["saved"] > 0 else "-"
             out.append(f"{name:<10}{row['attempts']:>9}{row['kept']:>6}{row['saved']:>9.2f}{per:>22}")
         return "\n".join(out)
-
-
-def _median(values: list) -> float:
-    return float(np.median(values)) if values else float("nan")
 
 
 def bench_smoothing(scene: Scene, seeds: int, folder, progress=print, repeat: int = 1,

@@ -162,7 +162,7 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
             run.marks = np.delete(run.marks, np.arange(i + 1, j))
         i += 1
     run.current = 1
-    for k in [k for _ in range(CORNER_ROUNDS) for k in range(1, len(run.marks) - 1)]:
+    for k in list(range(1, len(run.marks) - 1)) * CORNER_ROUNDS:
         for part in CORNERS:  # a corner cut nearer the vertex leaves the checked path less: more likely valid
             if run.checks >= budget:
                 break
