@@ -81,7 +81,7 @@ def test_bench_collision_json(tmp_path):
 
 
 SMALL_BENCH = ("roadmap.nodes=4", "roadmap.task_nodes=0", "pick_grasps.orientations=16", "place_grasps.orientations=16",
-               "motion.smooth_checks=2000")  # a motion benchmark's inputs made in seconds
+               "motion.smooth_checks_per_s=80")  # a motion benchmark's inputs made in seconds
 
 
 def _small_bench(tmp_path: Path, *args: str) -> tuple:

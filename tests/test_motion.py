@@ -197,11 +197,24 @@ def test_same_seed_same_motion(planned, tmp_path):
         assert (session.folder / name).read_bytes() == (again.folder / name).read_bytes()
 
 
+RATE = 60.0  # collision checks per second a run could save: a budget the example's runs reach
+
+
+def unsmoothed_duration(folder: Path) -> float:
+    """The example's motion planned again without shortcuts (both smoothing rates 0), in `folder`: its duration is at
+    least the sum of its runs' times rest to rest, each of which bounds what that run could save."""
+    bare = Session.open(EXAMPLE).branch(folder, "motion")
+    with cpu_budget(1):
+        run_pipeline(bare, params={"motion": {"smooth_checks_per_s": 0.0, "smooth_attempts_per_s": 0.0}})
+    return bare.result("motion").duration
+
+
 def test_the_smoothing_makes_no_more_checks_than_its_budget(tmp_path, monkeypatch):
-    """A ramp whose curve could need more checks than its run has left is not checked: the motion's smoothing checks
-    stay within `smooth_checks`, even when that budget is small (the passes test it before each attempt, the curve's
-    count bounds the attempt). The checks held back for the kept shortcuts are made early once too little is left
-    (as here, in the runs smoothed in this process), and the motion still passes the independent oracle."""
+    """A ramp whose curve could need more checks than its run has left is not checked: each run's smoothing checks stay
+    within `smooth_checks_per_s` times what it could save, so the motion's stay within that rate times its duration
+    timed rest to rest, even when the rate is small (the passes test the budget before each attempt, the curve's count
+    bounds the attempt). The checks held back for the kept shortcuts are made early once too little is left (as here,
+    in the runs smoothed in this process), and the motion still passes the independent oracle."""
     early = []
     settle = _Run.settle
 
@@ -213,10 +226,10 @@ def test_the_smoothing_makes_no_more_checks_than_its_budget(tmp_path, monkeypatc
     shutil.copytree(EXAMPLE, tmp_path / "example")
     session = Session.open(tmp_path / "example").branch(tmp_path / "small", "motion")
     with cpu_budget(1):
-        run_pipeline(session, params={"motion": {"smooth_checks": 1500}})
+        run_pipeline(session, params={"motion": {"smooth_checks_per_s": RATE}})
     motion = session.result("motion")
     spent = sum(phase["smoothing_checks"] for phase in motion.phases)
-    assert 0 < spent <= 1500
+    assert 0 < spent <= RATE * unsmoothed_duration(tmp_path / "bare")
     assert any(early), "no run made its kept shortcuts' checks early"
     bad = motion_collisions(session, motion)
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"

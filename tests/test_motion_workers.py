@@ -33,3 +33,68 @@ def test_one_process_or_forked_workers_plan_the_same_motion():
     inline, forked = made
     assert inline.phases == forked.phases  # Table I's counts: nodes, searches, checks, pair tests, smoothing checks
     assert np.array_equal(inline.t, forked.t) and np.array_equal(inline.q, forked.q)
+
+
+@pytest.mark.slow
+def test_the_runs_are_smoothed_alike_in_the_transit_workers_or_after_them(monkeypatch):
+    """A run is smoothed in the worker of the transit stage that completes it, or, where none did, after the transits:
+    its random stream comes from the run itself, so the motion is the same either way; and the workers did smooth the
+    runs that hold a transit (the motion's every run that could save time)."""
+    from planner.motion.double_grasp import DoubleGraspPlanner
+    from planner.motion.smoothing import Smoother
+
+    s = Session.open(EXAMPLE)
+    planners: list[DoubleGraspPlanner] = []
+    made = DoubleGraspPlanner.__init__
+
+    def kept(self, *args, **kwargs):
+        made(self, *args, **kwargs)
+        planners.append(self)
+
+    def plan():
+        with cpu_budget(2):
+            motion, _ = plan_motion(s.scene, s.result("pick_grasps"), s.result("place_grasps"), s.result("double_grasps"),
+                                    s.result("roadmap"), MotionParams(strategy="handover"),
+                                    np.random.default_rng(step_seed(0, "motion")),
+                                    configs=(s.result("grasp_configs"), GraspConfigParams()))
+        return motion, planners[-1]
+
+    monkeypatch.setattr(DoubleGraspPlanner, "__init__", kept)
+    there, planner = plan()
+    transits = [run for run in planner.smoothed.values() if any(p.part == "transit" for p in run.pieces)]
+    assert len(transits) == len(planner.smoothed) >= 4  # Grasp's, Carry's, Place's and Rest's runs
+    monkeypatch.setattr(Smoother, "smooth_runs", lambda self, *args: ({}, 0.0))
+    after, planner = plan()
+    assert not planner.smoothed
+    assert there.phases == after.phases
+    assert np.array_equal(there.t, after.t) and np.array_equal(there.q, after.q)
+
+
+def test_a_job_finishes_only_while_no_job_has_failed():
+    """The transit jobs finish in their workers (the smoothing of their runs) only while every job before has made its
+    pieces: once one failed, the double grasp is lost and so would be what the others finish. In one process, in
+    order: a job after a failure does not finish, a job before it does, and a failed job never does."""
+    from types import SimpleNamespace
+
+    from planner.motion.phase import Phase
+    from planner.motion.piece import PieceFailed
+    from planner.motion.runner import run_transits
+    from planner.motion.transit import TransitStats
+
+    def fails(stage):
+        raise PieceFailed(Phase.GRASP, "transit", "no way")
+
+    def moves(stage):
+        return ["piece"]
+
+    def run(jobs):
+        finished = []
+        stats = [TransitStats() for _ in Phase]
+        with cpu_budget(1):
+            results = run_transits([(Phase.GRASP, job) for job in jobs], lambda *a: SimpleNamespace(stats=a[3]),
+                                   SimpleNamespace(copy=lambda: None), np.random.default_rng(0), stats, None,
+                                   lambda i, pieces: finished.append(i) or i)
+        return finished, [done for _, done in results]
+
+    assert run([moves, fails, moves]) == ([0], [0, None, None])
+    assert run([moves, moves]) == ([0, 1], [0, 1])

@@ -1,10 +1,11 @@
 """A transit the graph and its quick reconnections cannot find is searched again by a patient planner
 (DoubleGraspPlanner.patiently), as the strategies plan the sequences that failed at a transit when none moved.
 
-On the example session, the Rest transit is planned with a graph joined to its ends by one edge at most and no
-reconnection left in the phase: the quick planner fails, the patient one finds it with RRTConnect given a whole
-query's budget. The path found is checked independently: the robot's URDF geometry through python-fcl, against
-the scene and the object at its final placement, every 0.01 rad.
+On the example session, a Rest transit (from the first of the Rest phase's early samples the quick planner cannot
+leave) is planned with a graph joined to its ends by one edge at most and no reconnection left in the phase: the
+quick planner fails, the patient one finds it with RRTConnect given a whole query's budget. The path found is
+checked independently: the robot's URDF geometry through python-fcl, against the scene and the object at its final
+placement, every 0.01 rad.
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from oracle import Oracle
 
 from planner.collision.checker import build_collision_model
@@ -31,16 +33,20 @@ EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example
 HURRIED = MotionParams(reconnect_motions=1, connections=1, max_connections=1, goal_nodes=1, max_searches=1, phase_reconnections=0)
 
 
-def _rest_transit() -> tuple[Session, np.ndarray, np.ndarray, Situation]:
-    """The example session and its Rest transit: from where the placing hand retreated to the final configuration."""
-    session = Session.open(EXAMPLE)
+def _hurried_failure(session: Session) -> tuple[np.ndarray, np.ndarray, Situation]:
+    """A Rest transit of the example the hurried planner cannot find: from the first of the samples in the first half
+    of its Rest phase (every sixth: near the placement first) from which that planner cannot reach the final
+    configuration of the arms and torso."""
     scene, m = session.scene, session.result("motion")
-    idx = transit_joints(scene.robot)
+    idx, situation = transit_joints(scene.robot), Situation(None, scene.object_final)
     rest = np.flatnonzero(m.phase == list(m.phase_names).index("Rest"))
-    qa = m.q[rest[0]]
-    qb = qa.copy()
-    qb[idx] = scene.q_final[idx]
-    return session, qa, qb, Situation(None, scene.object_final)
+    for qa in m.q[rest[: len(rest) // 2: 6]]:
+        qb = qa.copy()
+        qb[idx] = scene.q_final[idx]
+        job = (Phase.REST, lambda stage: [stage.transit(qa, qb, situation)])
+        if isinstance(_planner(session, HURRIED).transits([job], [0])[0], PieceFailed):
+            return qa, qb, situation
+    pytest.fail("the hurried search found every Rest transit tried: nothing left to find patiently")
 
 
 def _planner(session: Session, params: MotionParams, patient: bool = False) -> DoubleGraspPlanner:
@@ -52,15 +58,13 @@ def _planner(session: Session, params: MotionParams, patient: bool = False) -> D
 
 
 def test_a_transit_the_quick_search_misses_is_found_patiently():
-    session, qa, qb, situation = _rest_transit()
+    session = Session.open(EXAMPLE)
     scene = session.scene
+    qa, qb, situation = _hurried_failure(session)
     job = (Phase.REST, lambda stage: [stage.transit(qa, qb, situation)])
 
-    quick = _planner(session, HURRIED).transits([job])[0]
-    assert isinstance(quick, PieceFailed), "the hurried search found the transit: nothing left to find patiently"
-
     patient = _planner(session, HURRIED, patient=True)
-    found = patient.transits([job])[0]
+    found = patient.transits([job], [0])[0]
     assert not isinstance(found, PieceFailed), f"not found patiently either: {found}"
     assert patient.stats[Phase.REST].rrt_calls > 0, "no patient reconnection was made"
     path = found[0].path
@@ -131,18 +135,21 @@ def test_a_sequence_given_up_before_its_transits_adds_no_stage():
 
 
 def test_a_graph_query_left_without_reconnections_says_why():
-    """The example's Rest transit planned hurriedly fails; its failure names the phase's RRTConnect budget when none is
+    """A Rest transit of the example planned hurriedly fails; its failure names the phase's RRTConnect budget when none is
     left: none given (phase_reconnections 0), or spent by an earlier transit of the phase (1, taken by the first try,
     which it lets succeed)."""
     from dataclasses import replace
 
-    session, qa, qb, situation = _rest_transit()
+    session = Session.open(EXAMPLE)
+    qa, qb, situation = _hurried_failure(session)
 
     def failures(params: MotionParams) -> list[str]:
-        stage, out = _planner(session, params).stage(Phase.REST), []
+        """The transit searched twice, each time on its own copy of the graph (the first's reconnection does not join
+        the second's), the phase's figures shared."""
+        planner, out = _planner(session, params), []
         for _ in range(2):
             try:
-                stage.transit(qa, qb, situation)
+                planner.stage(Phase.REST, graph=planner.graph.copy()).transit(qa, qb, situation)
                 out.append("")
             except PieceFailed as exc:
                 out.append(exc.why)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from oracle import motion_collisions
+from test_motion import unsmoothed_duration
 from test_pair_levels import PairMotion, _recording, random_ramp
 
 from planner.collision.segments import SegmentChecker
@@ -135,8 +136,8 @@ def test_a_shortcut_kept_on_a_blind_screen_is_not_in_the_result(tmp_path, monkey
     assert any(failed), "no kept shortcut failed: the case shows nothing"
     bad = motion_collisions(session, motion)
     assert not bad, f"{len(bad)} colliding configurations, first: {bad[:3]}"
-    budget = session.record_of("motion")["params"]["smooth_checks"]
-    assert sum(p["smoothing_checks"] for p in motion.phases) <= budget
+    rate = session.record_of("motion")["params"]["smooth_checks_per_s"]
+    assert sum(p["smoothing_checks"] for p in motion.phases) <= rate * unsmoothed_duration(tmp_path / "bare")
 
 
 class _Counted:
@@ -179,7 +180,7 @@ def _one_run(monkeypatch, validity):
 
     monkeypatch.setattr(_Run, "validities", lambda self, t1, t2, moves: (validity,))
     robot = SimpleNamespace(nq=3, hand_idx={"right": np.array([], int)}, spec=SimpleNamespace(arm_names=["right"]))
-    smoother = Smoother(SimpleNamespace(robot=robot), np.ones(3), np.full(3, 2.0), 0.02)
+    smoother = Smoother(SimpleNamespace(robot=robot), np.ones(3), np.full(3, 2.0), 0.02, 0.0, 0.0, 0)
     path = np.cumsum(np.random.default_rng(3).normal(0, 1, (12, 3)), axis=0)
     situation = SimpleNamespace(touching=(), support=(), holder=None, pose=np.eye(4))
     return smoother, [SimpleNamespace(phase=0, part="transit", path=path, situation=situation)]

@@ -123,7 +123,7 @@ def add_bench(line: CommandLine) -> None:
            help="plan each seed K times with and K times without smoothing, alternately, and keep each one's fastest run")
     bs.add("--set", action="append", metavar="STEP.PARAM=VALUE",
            help="a step parameter for every run (repeatable; `regrasp params` lists them); the runs without smoothing set "
-                "motion.smooth_checks and motion.smooth_attempts to 0")
+                "motion.smooth_checks_per_s and motion.smooth_attempts_per_s to 0")
     add_json(bs, "the figures")
     bg = line.command("grasps", "each hand's grasp list: frames left per stage, grasps, seconds, grasps per second, and the "
                       "ratio to an earlier commit's builder run side by side", _cmd_bench_grasps, within="bench")

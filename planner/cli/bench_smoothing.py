@@ -80,11 +80,11 @@ class SmoothingBench:
 def bench_smoothing(scene: Scene, seeds: int, folder, progress=print, repeat: int = 1,
                     params: dict | None = None) -> SmoothingBench:
     """The offline steps once (seed 0, from the cache when there); per seed the online steps, then the motion planned
-    with the smoothing (the motion parameters as `params` set them) and without it (smooth_checks and smooth_attempts
-    0: the pieces timed rest to rest at every vertex), alternately, `repeat` times each, the fastest kept."""
+    with the smoothing (the motion parameters as `params` set them) and without it (smooth_checks_per_s and
+    smooth_attempts_per_s 0: the pieces timed rest to rest at every vertex), alternately, `repeat` times each, the fastest kept."""
     params = params or {}
     made, offline, (graph,) = bench_inputs(scene, folder, progress, params)
-    unsmoothed = replace(made["motion"], smooth_checks=0, smooth_attempts=0)
+    unsmoothed = replace(made["motion"], smooth_checks_per_s=0.0, smooth_attempts_per_s=0.0)
     runs = []
     for seed in range(seeds):
         results = seed_inputs(scene, made, offline, graph, seed)

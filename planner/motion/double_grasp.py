@@ -34,12 +34,14 @@ from planner.motion.phase import Phase
 from planner.motion.piece import TRANSIT_PARTS, HandGrasp, Piece, PieceFailed
 from planner.motion.result import MotionParams
 from planner.motion.runner import Job, run_transits
+from planner.motion.smoothing import SmoothedRun, Smoother
 from planner.motion.space import JointSpace
 from planner.motion.transit import TransitStats
 from planner.motion.transit_stage import TransitStage
 from planner.motion.validities import Validities
 
 GRASP, CARRY, PLACE, REST = Phase.GRASP, Phase.CARRY, Phase.PLACE, Phase.REST
+Layout = list[int | list[Piece]]  # the motion in order: a transit job's index, or pieces made before the transits
 
 
 class DoubleGraspPlanner:
@@ -53,6 +55,12 @@ class DoubleGraspPlanner:
         self.arms = ArmMotions(scene.robot, validities.data, params, self.stats)
         self.hand = Fingers(validities.cm)
         self.contact = ContactStages(scene, validities, self.arms, self.hand, params, self.stats)
+        robot = scene.robot
+        vmax = np.minimum(np.asarray(robot.model.velocityLimit, float), params.max_velocity)
+        self.smoother = Smoother(validities, vmax, np.full(robot.nq, params.max_acceleration), params.smooth_min_gain,
+                                 params.smooth_attempts_per_s, params.smooth_checks_per_s, int(rng.integers(2**63)))
+        self.smoothed: dict[tuple, SmoothedRun] = {}  # the runs the transit stages smoothed, by run_key,
+        self.smoothing_seconds = 0.0  # and the seconds their workers spent on it
 
     def stage(self, phase: Phase, graph: MotionGraph | None = None, rng: np.random.Generator | None = None,
               stats: TransitStats | None = None) -> TransitStage:
@@ -60,12 +68,29 @@ class DoubleGraspPlanner:
         return TransitStage(phase, self.validities, self.graph if graph is None else graph, self.rng if rng is None else rng,
                             self.stats[phase] if stats is None else stats, self.p, self.baseline)
 
-    def transits(self, jobs: list[Job]) -> list[list[Piece] | PieceFailed]:
-        """The jobs' pieces (or failures), run at once (see runner.py)."""
+    def transits(self, jobs: list[Job], layout: Layout) -> list[list[Piece] | PieceFailed]:
+        """The jobs' pieces (or failures), run at once (see runner.py). `layout`: the motion in order, a job's place by
+        its index, the pieces made before the transits as they are: each job's worker smooths the runs its pieces
+        complete (Smoother.smooth_runs), kept in `smoothed`."""
         robot = self.scene.robot
         weights = None if self.baseline else JointSpace.of(robot.lower, robot.upper, self.contact.transit_idx, self.hand.open)
-        return [self.patiently(job, result) for job, result in zip(jobs, run_transits(jobs, self.stage, self.graph, self.rng,
-                                                                                        self.stats, weights))]
+
+        def finish(i: int, pieces: list[Piece]) -> tuple[dict[tuple, SmoothedRun], float]:
+            k = layout.index(i)
+            start, end = k, k + 1
+            while start > 0 and not isinstance(layout[start - 1], int):
+                start -= 1
+            while end < len(layout) and not isinstance(layout[end], int):
+                end += 1
+            before = [p for known in layout[start:k] for p in known]
+            after = [p for known in layout[k + 1:end] for p in known]
+            return self.smoother.smooth_runs(before + pieces + after, pieces, start > 0, end < len(layout))
+
+        results = run_transits(jobs, self.stage, self.graph, self.rng, self.stats, weights, finish)
+        for _, (smoothed, seconds) in (r for r in results if r[1] is not None):
+            self.smoothed.update(smoothed)
+            self.smoothing_seconds += seconds
+        return [self.patiently(job, result) for job, (result, _) in zip(jobs, results)]
 
     def patiently(self, job: Job, result: list[Piece] | PieceFailed) -> list[Piece] | PieceFailed:
         """The job's result; for a patient planner, where its transit failed on the graph, the job run again here,
@@ -235,27 +260,25 @@ class DoubleGraspPlanner:
         q_end, opening = self.rest({b.arm: let_b} if direct else {a.arm: let_a, b.arm: let_b}, of)
 
         # the transits: independent of each other now that every contact motion is made; run longest first as measured
-        # (Carry's, Place's, Rest's, Grasp's, the arm away), so the last to finish is a short one
+        # with the smoothing of their runs (Place's, Carry's, Rest's, Grasp's), so the last to finish is a short one
         to_grasp: Job = (GRASP, lambda s: s.reach(scene.q_initial, grasps, first_grasp, static_i))
         to_rest: Job = (REST, lambda s: [s.transit(released_b[-1].path[-1], q_end, static_f)])
         if direct:  # carried by the one hand from the lift to above the placement
             carry, rest, to_grasp = self.transits([(CARRY, lambda s: s.reach(q_lifted, downs, first_down, held_a)), to_rest,
-                                                   to_grasp])
+                                                   to_grasp], [2, lifted, 0, released_b, 1, opening])
             raise_first([to_grasp, carry, rest])
             return to_grasp + lifted + carry + released_b + rest + opening
-        # the picking arm alone away from the object, then the Place transit from where it went: both at once, the second
-        # assuming the first reaches its first target; when it does not, the other targets are tried after them
+        # the picking arm alone away from the object, then the Place transit from where it went (from the retreat when
+        # the arm found no way away)
         q_retreat = retreat_a[-1].path[-1]
         targets = self.away_targets(q_retreat, a.arm, q_place, held_b)
-        start = targets[0] if targets else q_retreat
-        carry, to_place, rest, to_grasp, away = self.transits([
-            (CARRY, lambda s: s.reach(q_lifted, exchanges, first_exchange, held_a)),
-            (PLACE, lambda s: s.reach(start, downs, first_down, held_b)), to_rest, to_grasp,
-            (PLACE, lambda s: s.away(q_retreat, a.arm, targets[:1], held_b))])
-        raise_first([to_grasp, carry])
-        if targets and not away:
-            place = self.stage(PLACE)
-            away = place.away(q_retreat, a.arm, targets[1:], held_b)
-            to_place = place.reach((away or retreat_a)[-1].path[-1], downs, first_down, held_b)
-        raise_first([to_place, rest])
-        return to_grasp + lifted + carry + let_go_a + retreat_a + away + to_place + released_b + rest + opening
+
+        def to_place(s: TransitStage) -> list[Piece]:
+            away = s.away(q_retreat, a.arm, targets, held_b)
+            return away + s.reach((away or retreat_a)[-1].path[-1], downs, first_down, held_b)
+
+        place, carry, rest, to_grasp = self.transits([
+            (PLACE, to_place), (CARRY, lambda s: s.reach(q_lifted, exchanges, first_exchange, held_a)), to_rest, to_grasp],
+            [3, lifted, 1, let_go_a, retreat_a, 0, released_b, 2, opening])
+        raise_first([to_grasp, carry, place, rest])
+        return to_grasp + lifted + carry + let_go_a + retreat_a + place + released_b + rest + opening

@@ -46,8 +46,10 @@ class MotionParams:
     shortcut_min_gain: float = bounded(0.1, 0.0, 10.0, "rad", "a straight shortcut shortening the path by less is not checked")
     graph_shortcut_length: float = bounded(3.0, 0.0, 100.0, "rad",
                                            "roadmap: a graph path's shortcuts longer than this are not tried (but over an RRT detour)")
-    smooth_attempts: int = bounded(1000, 0, 1000000, "shortcuts", "random parabolic shortcuts drawn for the whole motion (runs share them)")
-    smooth_checks: int = bounded(24000, 0, 100000000, "collision checks", "all the smoothing may make (shared by its runs)")
+    smooth_attempts_per_s: float = bounded(40.0, 0.0, 100000.0, "shortcuts/s", "random parabolic shortcuts drawn for a run, per "
+                                           "second it could save (its time rest to rest less its ends' least)")
+    smooth_checks_per_s: float = bounded(1000.0, 0.0, 10000000.0, "checks/s", "collision checks a run's smoothing may make, per "
+                                         "second it could save")
     smooth_min_gain: float = bounded(0.02, 0.0, 10.0, "s", "a parabolic shortcut saving less time is not checked")
     goal_nodes: int = bounded(16, 1, 1000, "nodes", "transit: an end the graph cannot reach is reconnected to this many nodes")
     max_double_grasps: int = bounded(20, 1, 1000, "double grasps", "tried, best first")

@@ -1,6 +1,6 @@
-"""The motion's pieces as one sampled trajectory: each run smoothed (smoothing.py; the runs at once in forked workers,
-each with its own random stream drawn from the plan's), slowed to a whole number of sample periods, and read at the
-sampling rate.
+"""The motion's pieces as one sampled trajectory: each run smoothed (smoothing.py; most in the transit stages' workers
+as soon as their pieces exist, the rest here at once in forked workers; each with its own random stream, from the
+plan's and the run's pieces), slowed to a whole number of sample periods, and read at the sampling rate.
 
 Slowing a run by the fraction of a period it needs keeps every limit and puts its ends, where the robot rests
 (a hand closed, the object set down), on samples; every sample lies on the checked continuous motion. Each sample
@@ -15,7 +15,8 @@ import numpy as np
 
 from planner.core.forked import forked_map
 from planner.motion.piece import Piece
-from planner.motion.smoothing import Smoother, runs
+from planner.motion.runs import run_key, runs
+from planner.motion.smoothing import SmoothedRun, Smoother
 
 
 @dataclass
@@ -33,20 +34,18 @@ class Sampled:
     figures: list = field(default_factory=list)
 
 
-def sample(pieces: list[Piece], smoother: Smoother, rng: np.random.Generator, dt: float, attempts: int, budget: int) -> Sampled:
-    """Every run smoothed, slowed to whole periods of dt and sampled (see the module). The runs share `attempts` random
-    shortcuts and a `budget` of collision checks in proportion to what they could save (Smoother.could_save)."""
+def sample(pieces: list[Piece], smoother: Smoother, dt: float, made: dict[tuple, SmoothedRun]) -> Sampled:
+    """Every run smoothed (Smoother.smooth_run; those smoothed already, `made` by run_key, as they were), slowed to whole
+    periods of dt and sampled (see the module)."""
     out = Sampled()
     grouped = runs(pieces)
-    seeds = rng.integers(2**63, size=len(grouped))
-    share = np.array([smoother.could_save(run) for run in grouped])
-    share = share / max(share.sum(), 1e-12)
+    done = {i: made[run_key(run)] for i, run in enumerate(grouped) if run_key(run) in made}
+    budgets = {i: smoother.budget(run) for i, run in enumerate(grouped) if i not in done}
 
-    def smooth(i: int):
-        return smoother.smooth(grouped[i], np.random.default_rng(seeds[i]), int(attempts * share[i]), int(budget * share[i]))
-
-    order = np.argsort(-share, kind="stable")  # the longest work first: the last worker to finish ends the sooner
-    done = dict(zip(order.tolist(), forked_map(smooth, order.tolist())))
+    busy = sorted((i for i, b in budgets.items() if any(b)), key=lambda i: -budgets[i][1])  # the longest work first
+    smooth = (forked_map if len(busy) > 1 else map)(smoother.smooth_run, [grouped[i] for i in busy])
+    done.update(zip(busy, smooth))
+    done.update((i, smoother.smooth_run(grouped[i])) for i in budgets if i not in done)  # timed rest to rest: no fork
     for smoothed in (done[i] for i in range(len(grouped))):
         if smoothed.trajectory is None:
             continue

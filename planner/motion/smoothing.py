@@ -1,22 +1,24 @@
 """Smoothing the timed motion by checked parabolic shortcuts (Hauser and Ng-Thow-Hing, ICRA 2010).
 
-The pieces are grouped into runs: the robot comes to rest only between runs, where it must (a hand closes on the
-object or lets go of it, the object is lifted off or set down, the object's situation changes) and at the task's
-ends; fingers shaping before an approach, or opening at the end, may move while the arms do. A run starts
-timed rest to rest at every vertex (trajectory.py): exactly the checked polylines. Then, drawn from the plan's
-random stream, two times t1 < t2 of the run are joined by the time-optimal ramp between the states (positions and
-velocities) there (ramps.py); where it is faster, its middle configuration is free (one check, before any of its curve's
-checks is planned: most ramps that fail, fail there) and its curve passes a screen (its first checks: segments.py), it
-replaces that span, and the rest of its checks are made at the end, where it survives later shortcuts (tentative.py:
-the same displacement bound between checks as a straight segment; should one fail, that attempt is refused and the
-run smoothed again, the attempts before it replayed, the new ones checked whole). Inside one piece it is checked with that
-piece's own validity (a transit's paddings fitted to its ends, a contact motion's tight paddings); across pieces (a
-lift into a transit, a transit into an approach) with the transit profile in the object's situation without its
-exceptions (no fingertip nor support may touch), fitted to the ramp's ends: a hand near the object keeps the straight
-contact motion. Budgets are attempts and collision checks, never seconds: one seed, one trajectory on any machine.
+The pieces are grouped into runs (runs.py): the robot comes to rest only between runs, where it must, and at the
+task's ends; fingers shaping before an approach, or opening at the end, may move while the arms do. A run starts
+timed rest to rest at every vertex (trajectory.py): exactly the checked polylines. Then, drawn from the run's
+random stream (from the plan's and the run's pieces), two times t1 < t2 of the run are joined by the time-optimal
+ramp between the states (positions and velocities) there (ramps.py); where it is faster, its middle configuration is
+free (one check, before any of its curve's checks is planned: most ramps that fail, fail there) and its curve passes
+a screen (its first checks: segments.py), it replaces that span, and the rest of its checks are made at the end,
+where it survives later shortcuts (tentative.py: the same displacement bound between checks as a straight segment;
+should one fail, that attempt is refused and the run smoothed again, the attempts before it replayed, the new ones
+checked whole). Inside one piece it is checked with that piece's own validity (a transit's paddings fitted to its
+ends, a contact motion's tight paddings); across pieces (a lift into a transit, a transit into an approach) with the
+transit profile in the object's situation without its exceptions (no fingertip nor support may touch), fitted to the
+ramp's ends: a hand near the object keeps the straight contact motion. Budgets are attempts and collision checks per
+run, never seconds: one seed, one trajectory on any machine.
 """
 from __future__ import annotations
 
+import hashlib
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +27,7 @@ from planner.collision.situation import Situation
 from planner.collision.validity import Validity
 from planner.motion.piece import TRANSIT_PARTS, Piece
 from planner.motion.ramps import TINY, min_times, ramp
+from planner.motion.runs import ends_run, run_key, runs, starts_run
 from planner.motion.tentative import Outcome, Survivors
 from planner.motion.trajectory import Trajectory, rest_to_rest
 from planner.motion.validities import Validities
@@ -32,26 +35,8 @@ from planner.motion.validities import Validities
 LEAVING, REACHING = ("lift", "retreat"), ("approach", "set-down")  # contact motions starting / ending at the object
 CORNERS = (0.5, 0.25, 0.1)  # a vertex's corner cut spans this share of the segments before and after it, tried in turn
 CORNER_ROUNDS = 2  # rounds of corner cuts: the second, between the first's ramps, joins them (docs/benchmarks.md)
-RESTS = ("closing", "opening")  # a hand closes on the object or lets go of it: the robot rests before and after
 CHUNK = 256  # random shortcuts judged at once, the most promising attempted first
 PASSES = ("vertices", "corners", "random")  # the passes of `passes`, in their order
-
-
-def runs(pieces: list[Piece]) -> list[list[Piece]]:
-    """The pieces grouped into runs (see the module): a piece joins the run before it when neither closes a hand on
-    the object nor lets go of it, the object is where it was (static at one pose, or held by one hand in one grasp)
-    and it is neither set down nor lifted off between them."""
-    out: list[list[Piece]] = []
-    for piece in pieces:
-        if out:
-            last = out[-1][-1]
-            if (last.part not in RESTS and piece.part not in RESTS and last.part != "set-down"
-                    and piece.part != "lift" and last.situation.holder == piece.situation.holder
-                    and np.array_equal(last.situation.pose, piece.situation.pose)):
-                out[-1].append(piece)
-                continue
-        out.append([piece])
-    return out
 
 
 @dataclass(frozen=True)
@@ -74,8 +59,11 @@ class SmoothedRun:
 class Smoother:
     """Smooths runs of pieces with the checks of their situations (`validities`), under per-joint limits."""
 
-    def __init__(self, validities: Validities, vmax: np.ndarray, amax: np.ndarray, min_gain: float):
+    def __init__(self, validities: Validities, vmax: np.ndarray, amax: np.ndarray, min_gain: float, attempts_per_s: float,
+                 checks_per_s: float, seed: int):
         self.validities, self.vmax, self.amax, self.min_gain = validities, vmax, amax, min_gain
+        self.attempts_per_s, self.checks_per_s = attempts_per_s, checks_per_s
+        self.seed = seed  # with a run's pieces, its random stream (see stream)
 
     def rest_to_rest(self, pieces: list[Piece]) -> float:
         """How long the pieces take timed rest to rest at every vertex (before smoothing)."""
@@ -88,6 +76,36 @@ class Smoother:
         zero = np.zeros(len(self.vmax))
         least = min_times(pieces[-1].path[-1] - pieces[0].path[0], zero, zero, self.vmax, self.amax).max(initial=0.0)
         return max(self.rest_to_rest(pieces) - float(least), 0.0)
+
+    def budget(self, pieces: list[Piece]) -> tuple[int, int]:
+        """(random shortcuts, collision checks) the run's smoothing may make: per second it could save."""
+        could = self.could_save(pieces)
+        return int(self.attempts_per_s * could), int(self.checks_per_s * could)
+
+    def stream(self, pieces: list[Piece]) -> np.random.Generator:
+        """The run's random stream: from the smoother's seed and what the run is, so that a run smoothed in a transit
+        stage's worker or after the transits, in any order, is smoothed alike."""
+        digest = hashlib.blake2b(repr(run_key(pieces)).encode(), digest_size=8).digest()
+        return np.random.default_rng([self.seed, int.from_bytes(digest, "little")])
+
+    def smooth_run(self, pieces: list[Piece]) -> "SmoothedRun":
+        """The run smoothed with its budget and its stream."""
+        return self.smooth(pieces, self.stream(pieces), *self.budget(pieces))
+
+    def smooth_runs(self, pieces: list[Piece], owned: list[Piece], open_start: bool, open_end: bool
+                    ) -> tuple[dict[tuple, "SmoothedRun"], float]:
+        """(run_key -> the run smoothed (smooth_run), the seconds that took), for each run of `pieces` that holds a
+        transit of `owned` (a transit stage's pieces, `pieces` those with the motion's pieces before and after them)
+        and is whole: where pieces not known yet come before (`open_start`) or after (`open_end`), a run reaching that
+        edge is whole only where it starts or ends whatever is there."""
+        mine = {id(p) for p in owned if p.part in TRANSIT_PARTS}
+        out, start = {}, time.perf_counter()
+        for run in runs(pieces):
+            whole = ((run[0] is not pieces[0] or not open_start or starts_run(run[0]))
+                     and (run[-1] is not pieces[-1] or not open_end or ends_run(run[-1])))
+            if whole and any(id(p) in mine for p in run):
+                out[run_key(run)] = self.smooth_run(run)
+        return out, time.perf_counter() - start
 
     def own(self, piece: Piece, moving: np.ndarray) -> tuple[Validity, ...]:
         """The validity a piece was checked with (a transit's, its paddings fitted to its ends; a contact motion's),

@@ -30,7 +30,7 @@ from planner.motion.phase import Phase
 from planner.motion.piece import TRANSIT_PARTS, Piece
 from planner.motion.result import PHASES, TABLE_PHASES, Motion, MotionParams
 from planner.motion.sampling import sample
-from planner.motion.smoothing import PASSES, Smoother
+from planner.motion.smoothing import PASSES
 from planner.motion.strategies import Attempt
 from planner.motion.validities import Validities
 from planner.regrasp.placements import Placements
@@ -97,23 +97,21 @@ def _plan_motion(scene: Scene, pick: GraspList, place: GraspList, dg: DoubleGras
                       np.zeros(0, np.int8), np.zeros((0, 2, 3)), np.zeros(5, np.int64), tuple(robot.joint_names()),
                       alternatives=alternatives), attempt.seconds
     t = time.perf_counter()
-    motion = _sampled(scene, attempt, p, resolution, rng, alternatives)
+    motion = _sampled(scene, attempt, p, resolution, alternatives)
     names = len(motion.phase_names)
     seconds = [x for s in attempt.planner.stats[:names] for x in (s.seconds_planning, s.seconds_validating, s.seconds_reconnecting,
-                                                                   s.seconds_shortcut, s.seconds_contact)] + [time.perf_counter() - t]
+                                                                   s.seconds_shortcut, s.seconds_contact)]
+    seconds.append(time.perf_counter() - t + attempt.planner.smoothing_seconds)  # the smoothing in transit workers too
     seconds += attempt.seconds  # the search's stages come last in the result's stages too
     progress(1.0, f"{motion.duration:.1f} s of motion, {attempt.strategy} strategy, candidate {len(attempt.tried)}")
     return motion, seconds
 
 
-def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, rng: np.random.Generator,
-             alternatives: tuple) -> Motion:
+def _sampled(scene: Scene, attempt: Attempt, p: MotionParams, resolution: dict, alternatives: tuple) -> Motion:
     """Smooth and sample the attempt's pieces (sampling.py), and pose the object and wrists at every sample."""
     robot, pieces, planner = scene.robot, attempt.pieces, attempt.planner
     arms = list(robot.spec.arm_names)
-    vmax = np.minimum(np.asarray(robot.model.velocityLimit, float), p.max_velocity)
-    smoother = Smoother(planner.validities, vmax, np.full(robot.nq, p.max_acceleration), p.smooth_min_gain)
-    out = sample(pieces, smoother, rng, 1.0 / p.rate, p.smooth_attempts, p.smooth_checks)
+    out = sample(pieces, planner.smoother, 1.0 / p.rate, planner.smoothed)
     q = np.concatenate([scene.q_initial[None]] + out.q)
     qd = np.concatenate([np.zeros((1, robot.nq))] + out.v)  # at rest at the start
     qdd = np.concatenate([np.zeros((1, robot.nq)) if out.start_a is None else out.start_a] + out.a)

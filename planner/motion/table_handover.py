@@ -64,6 +64,7 @@ def plan_table(planner: DoubleGraspPlanner, q_grasp: np.ndarray, q_set: np.ndarr
         (SET_DOWN, lambda s: s.reach(q_lifted, down_here, first_here, held_a)),
         (REST, lambda s: [s.transit(released_b[-1].path[-1], q_end, Situation(None, of))]),
         (GRASP, lambda s: s.reach(scene.q_initial, grasps, first_grasp, Situation(None, oi))),
-        (REGRASP, lambda s: s.reach(q_after, takes, first_take, Situation(None, pose)))])
+        (REGRASP, lambda s: s.reach(q_after, takes, first_take, Situation(None, pose)))],
+        [3, lifted, 1, released_a, 4, lifted_b, 0, released_b, 2, opening])
     raise_first([to_grasp, to_table, to_take, carry, rest])
     return to_grasp + lifted + to_table + released_a + to_take + lifted_b + carry + released_b + rest + opening
