@@ -4,8 +4,9 @@ The pieces are grouped into runs (runs.py): the robot comes to rest only between
 task's ends; fingers shaping before an approach, or opening at the end, may move while the arms do. A run starts
 timed rest to rest at every vertex (trajectory.py): exactly the checked polylines. Then, drawn from the run's
 random stream (from the plan's and the run's pieces), two times t1 < t2 of the run are joined by the time-optimal
-ramp between the states (positions and velocities) there (ramps.py); where it is faster, its middle configuration is
-free (one check, before any of its curve's checks is planned: most ramps that fail, fail there) and its curve passes
+ramp between the states (positions and velocities) there (ramps.py); where it is faster, its middle and quarter
+configurations are free (PROBES: checked before any of its curve's checks is planned, most ramps that fail fail
+there) and its curve passes
 a screen (its first checks: segments.py), it replaces that span, and the rest of its checks are made at the end,
 where it survives later shortcuts (tentative.py: the same displacement bound between checks as a straight segment;
 should one fail, that attempt is refused and the run smoothed again, the attempts before it replayed, the new ones
@@ -37,6 +38,7 @@ CORNERS = (0.5, 0.25, 0.1)  # a vertex's corner cut spans this share of the segm
 CORNER_ROUNDS = 2  # rounds of corner cuts: the second, between the first's ramps, joins them (docs/benchmarks.md)
 CHUNK = 256  # random shortcuts judged at once, the most promising attempted first
 PASSES = ("vertices", "corners", "random")  # the passes of `passes`, in their order
+PROBES = (0.5, 0.25, 0.75)  # a ramp's configurations checked before its curve's checks are planned, as shares of its duration
 
 
 @dataclass(frozen=True)
@@ -328,8 +330,9 @@ class _Run:
         return self.budget - self.spent - self.survivors.reserved
 
     def _try(self, t1: float, t2: float) -> Outcome:
-        """A new attempt (see attempt). A ramp's middle is checked first, while the budget has room for it: a ramp through
-        a colliding configuration is refused before its curve's checks are planned. Then it is screened while the budget
+        """A new attempt (see attempt). A ramp's probes (PROBES: its middle, then its quarters) are checked first, each
+        while the budget has room for it: a ramp through a colliding configuration is refused before its curve's checks
+        are planned. Then it is screened while the budget
         has left what its screen and its whole check could need (the surviving shortcuts' checks made at once first,
         should what they hold back leave less); else it is checked whole, as far as its whole check fits, else not
         tried."""
@@ -343,9 +346,14 @@ class _Run:
         validities = self.validities(t1, t2, np.any(shortcut.v != 0, axis=0) | np.any(shortcut.a != 0, axis=0))
         if validities is None or len(validities) > self._left():
             return refused
-        middle = shortcut.positions(np.array([0.5 * shortcut.duration]))[0]  # on the ramp: a collision there refuses it
         before = sum(v.checks for v in validities)
-        clear = all(v.state_valid(middle) for v in validities)
+        clear = True
+        for k, q in enumerate(shortcut.positions(np.array(PROBES) * shortcut.duration)):  # on the ramp: a collision refuses it
+            if k and len(validities) > self._left() - (sum(v.checks for v in validities) - before):
+                break
+            clear = all(v.state_valid(q) for v in validities)
+            if not clear:
+                break
         first = sum(v.checks for v in validities) - before
         self.spent += first
         if not clear:
