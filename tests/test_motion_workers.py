@@ -38,18 +38,19 @@ def test_one_process_or_forked_workers_plan_the_same_motion():
 @pytest.mark.slow
 def test_the_runs_are_smoothed_alike_in_the_transit_workers_or_after_them(monkeypatch):
     """A run is smoothed in the worker of the transit stage that completes it, or, where none did, after the transits:
-    its random stream comes from the run itself, so the motion is the same either way; and the workers did smooth the
-    runs that hold a transit (the motion's every run that could save time)."""
-    from planner.motion.double_grasp import DoubleGraspPlanner
+    its random stream comes from the run itself, so the motion is the same either way; and the workers did smooth
+    every run that holds a transit (the layout the handover gives its jobs is right)."""
+    import planner.motion.step
+    from planner.motion.runs import run_key, runs
     from planner.motion.smoothing import Smoother
 
     s = Session.open(EXAMPLE)
-    planners: list[DoubleGraspPlanner] = []
-    made = DoubleGraspPlanner.__init__
+    sampled = []
+    sample = planner.motion.step.sample
 
-    def kept(self, *args, **kwargs):
-        made(self, *args, **kwargs)
-        planners.append(self)
+    def kept(pieces, smoother, dt, made):
+        sampled.append((pieces, made))
+        return sample(pieces, smoother, dt, made)
 
     def plan():
         with cpu_budget(2):
@@ -57,15 +58,15 @@ def test_the_runs_are_smoothed_alike_in_the_transit_workers_or_after_them(monkey
                                     s.result("roadmap"), MotionParams(strategy="handover"),
                                     np.random.default_rng(step_seed(0, "motion")),
                                     configs=(s.result("grasp_configs"), GraspConfigParams()))
-        return motion, planners[-1]
+        return motion, sampled[-1]
 
-    monkeypatch.setattr(DoubleGraspPlanner, "__init__", kept)
-    there, planner = plan()
-    transits = [run for run in planner.smoothed.values() if any(p.part == "transit" for p in run.pieces)]
-    assert len(transits) == len(planner.smoothed) >= 4  # Grasp's, Carry's, Place's and Rest's runs
+    monkeypatch.setattr(planner.motion.step, "sample", kept)
+    there, (pieces, made) = plan()
+    transits = [run_key(run) for run in runs(pieces) if any(p.part == "transit" for p in run)]
+    assert len(transits) == 4 and set(transits) == set(made)  # Grasp's, Carry's, Place's and Rest's runs
     monkeypatch.setattr(Smoother, "smooth_runs", lambda self, *args: ({}, 0.0))
-    after, planner = plan()
-    assert not planner.smoothed
+    after, (_, made) = plan()
+    assert not made
     assert there.phases == after.phases
     assert np.array_equal(there.t, after.t) and np.array_equal(there.q, after.q)
 
