@@ -240,6 +240,30 @@ def test_a_session_saved_before_the_placements_step_opens(example):
     assert "needs 'roadmap'" in _open_error(example)
 
 
+def test_a_session_saved_with_a_retired_parameter_opens_and_runs_again(example, tmp_path):
+    """A session whose motion was planned with the smoothing's whole-motion budgets (`smooth_attempts`, `smooth_checks`,
+    retired in stop 58 for per-run ones) opens with its motion; running the step again takes today's parameters. A
+    parameter no version had is still refused."""
+    from planner.core.forked import cpu_budget
+
+    manifest = json.loads((example / MANIFEST).read_text())
+    record = next(r for r in manifest["steps"] if r["name"] == "motion")
+    for name in ("smooth_attempts_per_s", "smooth_checks_per_s"):
+        record["params"].pop(name)
+    record["params"].update(smooth_attempts=1000, smooth_checks=24000)
+    (example / MANIFEST).write_text(json.dumps(manifest))
+    session = Session.open(example)
+    assert session.result("motion").duration > 0 and session.record_of("motion")["params"]["smooth_checks"] == 24000
+    again = session.branch(tmp_path / "again", "motion")
+    with cpu_budget(1):
+        run_pipeline(again, params={"motion": {"smooth_attempts_per_s": 0.0, "smooth_checks_per_s": 0.0}})
+    assert again.result("motion").duration > 0 and "smooth_checks" not in again.record_of("motion")["params"]
+    record["params"]["smooth_everything"] = 1
+    (example / MANIFEST).write_text(json.dumps(manifest))
+    msg = _open_error(example)
+    assert f"steps[{manifest['steps'].index(record)}].params" in msg and "smooth_everything" in msg
+
+
 def test_branch_keeps_the_original(example, tmp_path):
     folder = example
     before = {p.name: p.read_bytes() for p in folder.iterdir()}

@@ -182,7 +182,7 @@ def _check_step(record: Any, index: int, done: list[str], path: Path) -> None:
     params = typed(record["params"], dict, path, f"{field}.params", "an object of parameters")
     _finite_params(params, path, f"{field}.params")  # first: it names the parameter's own field
     try:
-        step.make_params(params)
+        step.recorded_params(params)
     except RegraspError as exc:
         raise InputError(path, f"{field}.params", str(exc)) from exc
     _seed(record["seed"], path, f"{field}.seed")

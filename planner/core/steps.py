@@ -74,6 +74,13 @@ class Step:
     run: Callable[[StepContext], StepOutput]
     seed_name: str = ""  # the name its generator's seed is derived from (default: its own); steps sharing one draw alike
     recoverable: bool = False  # its failure leaves a later step a fallback: the pipeline goes on past it (see runner.py)
+    retired: tuple[str, ...] = ()  # parameters it no longer has, which sessions saved before still record
+
+    def recorded_params(self, recorded: Mapping[str, Any]) -> Any:
+        """The parameters a session record gives (make_params), less the retired ones: a session saved before a
+        parameter was renamed or removed still opens, its result made as its record says; running the step again takes
+        today's parameter instead (its default, unless given)."""
+        return self.make_params({k: v for k, v in recorded.items() if k not in self.retired})
 
     def seed(self, session_seed: int) -> int:
         """The seed of this step's generator in a session with this seed."""

@@ -189,4 +189,5 @@ def run(ctx: StepContext) -> StepOutput:
 
 NAME = "motion"
 STEP = Step(NAME, "the whole task's motion: Grasp, Carry, Place, Rest on the Super Graph (V-B)",
-            ("pick_grasps", "place_grasps", "grasp_configs", "double_grasps", "roadmap", "placements"), MotionParams, Motion, run)
+            ("pick_grasps", "place_grasps", "grasp_configs", "double_grasps", "roadmap", "placements"), MotionParams, Motion, run,
+            retired=("smooth_attempts", "smooth_checks"))  # one budget for the whole motion: per run since stop 58

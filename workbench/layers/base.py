@@ -73,7 +73,7 @@ class StepLayer(Rooted, ABC):
         """The frozen parameters the drawn session ran step `name` with (what its result was computed with)."""
         if self.session is None:
             raise RegraspError(f"{type(self).__name__} needs the session to read the parameters of step '{name}'")
-        return step_named(name).make_params(self.session.record_of(name)["params"])
+        return step_named(name).recorded_params(self.session.record_of(name)["params"])
 
     @abstractmethod
     def update(self, result: Any) -> None:
