@@ -45,7 +45,8 @@ def sample(pieces: list[Piece], smoother: Smoother, dt: float, made: dict[tuple,
     busy = sorted((i for i, b in budgets.items() if any(b)), key=lambda i: -budgets[i][1])  # the longest work first
     smooth = (forked_map if len(busy) > 1 else map)(smoother.smooth_run, [grouped[i] for i in busy])
     done.update(zip(busy, smooth))
-    done.update((i, smoother.smooth_run(grouped[i])) for i in budgets if i not in done)  # timed rest to rest: no fork
+    for i in budgets.keys() - done.keys():  # no budget: timed rest to rest, nothing to fork for
+        done[i] = smoother.smooth_run(grouped[i])
     for smoothed in (done[i] for i in range(len(grouped))):
         if smoothed.trajectory is None:
             continue
