@@ -90,6 +90,30 @@ def test_one_arm_carries_the_object_itself(direct):
     assert set(m.holder[m.holder >= 0]) == {m.arms.index("left")}, "another hand held the object"
 
 
+@pytest.mark.slow
+def test_a_direct_transfer_smooths_its_runs_in_the_transit_workers(direct, tmp_path, monkeypatch):
+    """A direct transfer's transit jobs (Carry, Rest, Grasp) each smooth, in their worker, the run their transit
+    completes: none is left to smooth after the transits (its layout of the jobs is right)."""
+    import planner.motion.step
+    from planner.motion.runs import run_key, runs
+
+    sampled = []
+    sample = planner.motion.step.sample
+
+    def kept(pieces, smoother, dt, made):
+        sampled.append((pieces, made))
+        return sample(pieces, smoother, dt, made)
+
+    monkeypatch.setattr(planner.motion.step, "sample", kept)
+    session, m = direct
+    again = session.branch(tmp_path / "again", "motion")
+    run_pipeline(again)
+    (pieces, made), = sampled
+    transits = [run_key(run) for run in runs(pieces) if any(p.part == "transit" for p in run)]
+    assert len(transits) == 3 and set(transits) == set(made)
+    assert np.array_equal(again.result("motion").q, m.q)  # the same motion as the session's
+
+
 def test_trajectory_passes_the_task_configurations(either):
     session, m = either
     scene, dg = session.scene, session.result("double_grasps")
