@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from generated_objects import TASK_TEXT_ROBOT
 from oracle import Oracle, grasp_offset, motion_collisions
+from test_motion_workers import sampled_runs, transit_runs
 
 from planner.core.forked import cpu_budget
 from planner.core.runner import run_pipeline
@@ -94,22 +95,12 @@ def test_one_arm_carries_the_object_itself(direct):
 def test_a_direct_transfer_smooths_its_runs_in_the_transit_workers(direct, tmp_path, monkeypatch):
     """A direct transfer's transit jobs (Carry, Rest, Grasp) each smooth, in their worker, the run their transit
     completes: none is left to smooth after the transits (its layout of the jobs is right)."""
-    import planner.motion.step
-    from planner.motion.runs import run_key, runs
-
-    sampled = []
-    sample = planner.motion.step.sample
-
-    def kept(pieces, smoother, dt, made):
-        sampled.append((pieces, made))
-        return sample(pieces, smoother, dt, made)
-
-    monkeypatch.setattr(planner.motion.step, "sample", kept)
+    sampled = sampled_runs(monkeypatch)
     session, m = direct
     again = session.branch(tmp_path / "again", "motion")
     run_pipeline(again)
     (pieces, made), = sampled
-    transits = [run_key(run) for run in runs(pieces) if any(p.part == "transit" for p in run)]
+    transits = transit_runs(pieces)
     assert len(transits) == 3 and set(transits) == set(made)
     assert np.array_equal(again.result("motion").q, m.q)  # the same motion as the session's
 

@@ -19,6 +19,28 @@ from planner.motion.result import MotionParams
 EXAMPLE = Path(__file__).resolve().parent.parent / "sessions" / "default-example"
 
 
+def sampled_runs(monkeypatch) -> list:
+    """The (pieces, runs smoothed in the transit workers) each motion step hands to its sampling, recorded from now on."""
+    import planner.motion.step
+
+    sampled = []
+    sample = planner.motion.step.sample
+
+    def kept(pieces, smoother, dt, made):
+        sampled.append((pieces, made))
+        return sample(pieces, smoother, dt, made)
+
+    monkeypatch.setattr(planner.motion.step, "sample", kept)
+    return sampled
+
+
+def transit_runs(pieces) -> list:
+    """The run_key of each run of `pieces` that holds a transit."""
+    from planner.motion.runs import run_key, runs
+
+    return [run_key(run) for run in runs(pieces) if any(p.part == "transit" for p in run)]
+
+
 @pytest.mark.slow
 def test_one_process_or_forked_workers_plan_the_same_motion():
     s = Session.open(EXAMPLE)
@@ -40,17 +62,10 @@ def test_the_runs_are_smoothed_alike_in_the_transit_workers_or_after_them(monkey
     """A run is smoothed in the worker of the transit stage that completes it, or, where none did, after the transits:
     its random stream comes from the run itself, so the motion is the same either way; and the workers did smooth
     every run that holds a transit (the layout the handover gives its jobs is right)."""
-    import planner.motion.step
-    from planner.motion.runs import run_key, runs
     from planner.motion.smoothing import Smoother
 
     s = Session.open(EXAMPLE)
-    sampled = []
-    sample = planner.motion.step.sample
-
-    def kept(pieces, smoother, dt, made):
-        sampled.append((pieces, made))
-        return sample(pieces, smoother, dt, made)
+    sampled = sampled_runs(monkeypatch)
 
     def plan():
         with cpu_budget(2):
@@ -60,9 +75,8 @@ def test_the_runs_are_smoothed_alike_in_the_transit_workers_or_after_them(monkey
                                     configs=(s.result("grasp_configs"), GraspConfigParams()))
         return motion, sampled[-1]
 
-    monkeypatch.setattr(planner.motion.step, "sample", kept)
     there, (pieces, made) = plan()
-    transits = [run_key(run) for run in runs(pieces) if any(p.part == "transit" for p in run)]
+    transits = transit_runs(pieces)
     assert len(transits) == 4 and set(transits) == set(made)  # Grasp's, Carry's, Place's and Rest's runs
     monkeypatch.setattr(Smoother, "smooth_runs", lambda self, *args: ({}, 0.0))
     after, (_, made) = plan()

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from generated_objects import TASK_TEXT_ROBOT
 from oracle import Oracle, grasp_offset, motion_collisions
+from test_motion_workers import sampled_runs, transit_runs
 
 from planner.core.results import load_result, save_result
 from planner.core.runner import run_pipeline, run_step
@@ -94,17 +95,7 @@ def test_the_placements_step_is_recorded_and_drawn(tmp_path, cube_scene):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SMALL_OBJECTS))
 def test_a_small_object_is_handed_over_through_the_table(tmp_path, name, monkeypatch):
-    import planner.motion.step
-    from planner.motion.runs import run_key, runs
-
-    sampled = []
-    sample = planner.motion.step.sample
-
-    def kept(pieces, smoother, dt, made):
-        sampled.append((pieces, made))
-        return sample(pieces, smoother, dt, made)
-
-    monkeypatch.setattr(planner.motion.step, "sample", kept)
+    sampled = sampled_runs(monkeypatch)
     scene = load_task(small_object_task(tmp_path, name))
     session = Session.create(tmp_path / "session", scene, 0)
     run_pipeline(session, params=SMALL_OBJECT_PARAMS[name])
@@ -112,7 +103,7 @@ def test_a_small_object_is_handed_over_through_the_table(tmp_path, name, monkeyp
     assert not m.failure and m.strategy == "table"
     # each of the five transit jobs (Grasp, Set down, Regrasp, Carry, Rest) smoothed the run its transit completes
     (pieces, made), = sampled
-    transits = [run_key(run) for run in runs(pieces) if any(p.part == "transit" for p in run)]
+    transits = transit_runs(pieces)
     assert len(transits) == 5 and set(transits) <= set(made)
     rejected = {a["strategy"]: a["failure"] for a in m.alternatives}
     assert set(rejected) == {"handover", "regrasp"} and rejected["handover"].startswith("double grasps:")

@@ -6,15 +6,14 @@ timed rest to rest at every vertex (trajectory.py): exactly the checked polyline
 random stream (from the plan's and the run's pieces), two times t1 < t2 of the run are joined by the time-optimal
 ramp between the states (positions and velocities) there (ramps.py); where it is faster, its middle and quarter
 configurations are free (PROBES: checked before any of its curve's checks is planned, most ramps that fail fail
-there) and its curve passes
-a screen (its first checks: segments.py), it replaces that span, and the rest of its checks are made at the end,
-where it survives later shortcuts (tentative.py: the same displacement bound between checks as a straight segment;
-should one fail, that attempt is refused and the run smoothed again, the attempts before it replayed, the new ones
-checked whole). Inside one piece it is checked with that piece's own validity (a transit's paddings fitted to its
-ends, a contact motion's tight paddings); across pieces (a lift into a transit, a transit into an approach) with the
-transit profile in the object's situation without its exceptions (no fingertip nor support may touch), fitted to the
-ramp's ends: a hand near the object keeps the straight contact motion. Budgets are attempts and collision checks per
-run, never seconds: one seed, one trajectory on any machine.
+there) and its curve passes a screen (its first checks: segments.py), it replaces that span, and the rest of its
+checks are made at the end, where it survives later shortcuts (tentative.py: the same displacement bound between
+checks as a straight segment; should one fail, that attempt is refused and the run smoothed again, the attempts
+before it replayed, the new ones checked whole). Inside one piece it is checked with that piece's own validity (a
+transit's paddings fitted to its ends, a contact motion's tight paddings); across pieces (a lift into a transit, a
+transit into an approach) with the transit profile in the object's situation without its exceptions (no fingertip nor
+support may touch), fitted to the ramp's ends: a hand near the object keeps the straight contact motion. Budgets are
+attempts and collision checks per run, never seconds: one seed, one trajectory on any machine.
 """
 from __future__ import annotations
 
@@ -332,10 +331,9 @@ class _Run:
     def _try(self, t1: float, t2: float) -> Outcome:
         """A new attempt (see attempt). A ramp's probes (PROBES: its middle, then its quarters) are checked first, each
         while the budget has room for it: a ramp through a colliding configuration is refused before its curve's checks
-        are planned. Then it is screened while the budget
-        has left what its screen and its whole check could need (the surviving shortcuts' checks made at once first,
-        should what they hold back leave less); else it is checked whole, as far as its whole check fits, else not
-        tried."""
+        are planned. Then it is screened while the budget has left what its screen and its whole check could need (the
+        surviving shortcuts' checks made at once first, should what they hold back leave less); else it is checked
+        whole, as far as its whole check fits, else not tried."""
         p, refused = self.smoother, Outcome((t1, t2))
         if t2 - t1 <= p.min_gain:
             return refused
