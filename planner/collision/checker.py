@@ -337,25 +337,31 @@ class CollisionChecker:
 
     def _past_screens(self, gd: pin.GeometryData, manager, screen: Screen) -> bool:
         """After a hit: whether the subset's own pairs collide. A screening pair hit (the object's hull, which holds its
-        mesh) is answered by its twin, tested alone, and switched off while the broad phase looks on, until it finds
-        nothing or one of the subset's own pairs (no switching of the thousands of pair flags to the exact table)."""
-        first, off = self._first, []
-        try:
-            while screen.screening[first.collisionPairIndex]:
-                k = first.collisionPairIndex
-                self.pair_tests += 1
-                if pin.computeCollision(self.cm.geometry, gd, int(self.cm.twins[k])):
-                    return True
-                gd.deactivateCollisionPair(k)
-                off.append(k)
-                hit = pin.computeCollisions(manager, first)
-                self.pair_tests += first.count
-                if not hit:
-                    return False
+        mesh) is answered by its twin, tested alone; should the twin miss, one more broad-phase pass collects every
+        pair whose boxes overlap (no exact test), and those are tested one by one, a screening pair by its hull, then
+        its twin (a hand's fingers inside the hull it just let go of overlap it pair after pair: one pass, not one per
+        pair)."""
+        gm, k = self.cm.geometry, self._first.collisionPairIndex
+        if not screen.screening[k]:
             return True
-        finally:
-            for k in off:
-                gd.activateCollisionPair(k)
+        self.pair_tests += 1
+        if pin.computeCollision(gm, gd, int(self.cm.twins[k])):
+            return True
+        if self._collect is None:
+            self._collect = pin.CollisionCallBackCollect(gm, gd)
+        pin.computeCollisions(manager, self._collect)
+        for j in self._collect.pair_indexes:
+            if j == k:
+                continue
+            self.pair_tests += 1
+            if not pin.computeCollision(gm, gd, int(j)):
+                continue
+            if not screen.screening[j]:
+                return True
+            self.pair_tests += 1
+            if pin.computeCollision(gm, gd, int(self.cm.twins[j])):
+                return True
+        return False
 
     def colliding(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[int]:
         """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says
