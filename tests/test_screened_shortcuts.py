@@ -190,6 +190,7 @@ def test_a_ramp_whose_middle_collides_is_refused_after_that_one_check(monkeypatc
     """A ramp's middle (half its duration, a configuration the ramp passes through) is checked before its curve's checks
     are planned: where it collides, the attempt is refused after that single check, no curve check is planned or made,
     and the run stays timed rest to rest at every vertex."""
+    from planner.motion.smoothing import _Run
 
     class Middle:
         checks = 0
@@ -209,13 +210,16 @@ def test_a_ramp_whose_middle_collides_is_refused_after_that_one_check(monkeypatc
     validity = Middle()
     smoother, pieces = _one_run(monkeypatch, validity)
     tried = []
-    def recorded(*args, **kwargs):
-        out = ramp(*args, **kwargs)
-        if out is not None:
-            tried.append(out)
-        return out
+    attempt = _Run._try
 
-    monkeypatch.setattr("planner.motion.smoothing.ramp", recorded)
+    def recorded(self, t1, t2, known=None):  # the ramp each attempt stands for, made alone by ramps.ramp
+        (qa, qb), (va, vb) = self.traj.states(np.array([t1, t2]))
+        out = ramp(qa, va, qb, vb, self.smoother.vmax, self.smoother.amax, t2 - t1 - self.smoother.min_gain)
+        if out is not None and t2 - t1 > self.smoother.min_gain:
+            tried.append(out)
+        return attempt(self, t1, t2, known)
+
+    monkeypatch.setattr(_Run, "_try", recorded)
     run = smoother.smooth(pieces, np.random.default_rng(7), 400, 4000)
     assert run.shortcuts == 0 and 0 < run.checks == validity.checks == len(tried)
     for shortcut, middle in zip(tried, validity.middles):  # each check was of its ramp's middle

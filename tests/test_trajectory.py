@@ -13,7 +13,7 @@ from oracle import Oracle
 from scipy.optimize import linprog
 
 from planner.collision.validity import Profile, make_validity
-from planner.motion.ramps import min_times, ramp
+from planner.motion.ramps import first_plans, min_times, moving, plan, positions, ramp
 from planner.motion.trajectory import Trajectory, rest_to_rest, trapezoid
 
 
@@ -95,6 +95,35 @@ def test_synchronised_ramps_reach_the_goal_state_within_the_limits():
         assert np.abs(np.diff(q, axis=0)).max() < 1e-3  # continuous
 
 
+def test_ramps_planned_at_once_are_the_ramps_made_one_by_one():
+    """The random pass judges a chunk of ramps at once and checks their probes before any is made: the plans made at
+    once are bit for bit those `plan` makes alone (where the slowest joint's shortest duration admits one), their
+    positions in closed form are the made trajectory's, and the joints they move are those whose trajectory moves."""
+    rng = np.random.default_rng(5)
+    vmax, amax = np.array([1.0, 1.0, 0.7]), np.array([2.0, 2.0, 1.5])
+    n = 3000
+    q0, q1 = np.zeros((n, 3)), rng.uniform(-1, 1, (n, 3))
+    v0, v1 = rng.uniform(-1, 1, (n, 3)) * vmax, rng.uniform(-1, 1, (n, 3)) * vmax
+    still = rng.random((n, 3)) < 0.2  # joints a ramp leaves at rest
+    q1[still], v0[still], v1[still] = 0.0, 0.0, 0.0
+    within = np.where(rng.random(n) < 0.2, rng.uniform(0.0, 2.0, n), np.inf)
+    T, a, vc, planned = first_plans(q0, v0, q1, v1, vmax, amax, within)
+    taus = T[:, None] * np.array([0.5, 0.25, 0.75, 0.0, 1.0])
+    at = positions(q0, v0, v1, a, vc, T, taus)
+    stretched = 0  # ramps whose slowest joint's shortest duration is in another joint's inoperative interval
+    for i in range(n):
+        alone = plan(q0[i], v0[i], q1[i], v1[i], vmax, amax, within[i])
+        if not planned[i]:
+            assert alone is None or alone[0] > T[i] or not T[i] < within[i]
+            stretched += alone is not None
+            continue
+        assert alone[0] == T[i] and np.array_equal(alone[1], a[i]) and np.array_equal(alone[2], vc[i])
+        made = ramp(q0[i], v0[i], q1[i], v1[i], vmax, amax, within[i])
+        assert np.allclose(at[i], made.positions(taus[i]), atol=1e-12, rtol=0)
+        assert np.array_equal(moving(v0[i], v1[i], a[i], vc[i]), np.any(made.v != 0, axis=0) | np.any(made.a != 0, axis=0))
+    assert planned.sum() > 0.5 * n and stretched > 10
+
+
 def test_a_spliced_ramp_keeps_the_trajectory_continuous():
     rng = np.random.default_rng(5)
     vmax, amax = np.ones(3), np.full(3, 2.0)
@@ -169,13 +198,13 @@ def test_random_shortcuts_are_attempted_most_promising_first():
     traj = rest_to_rest(np.cumsum(rng.normal(0, 1, (8, 3)), axis=0), vmax, amax)
     run = object.__new__(_Run)
     run.smoother = SimpleNamespace(vmax=vmax, amax=amax, min_gain=0.02)
-    run.traj, run.drawn, run.pending, run.gains = traj, 0, None, None
+    run.traj, run.drawn, run.pending, run.gains, run.judged = traj, 0, None, None, {}
     draws = rng.random((CHUNK + 40, 2))
     order, bounds = [], []
     while (k := run.next_draw(draws)) is not None:
         t1, t2 = np.sort(draws[k] * traj.duration)
         (qa, qb), (va, vb) = traj.states(np.array([t1, t2]))
-        bound = run._gain_bounds(draws[k][None])[0]
+        bound = run._judge(draws[k][None])[0][0]
         r = ramp(qa, va, qb, vb, vmax, amax)
         assert r is not None and t2 - t1 - r.duration <= bound + 1e-9, "a ramp saved more than its bound"
         assert bound > 0
@@ -184,7 +213,7 @@ def test_random_shortcuts_are_attempted_most_promising_first():
     first = [b for k, b in zip(order, bounds) if k < CHUNK]
     assert len(first) and all(k < CHUNK for k in order[:len(first)]), "a chunk is done before the next is judged"
     assert np.all(np.diff(first) <= 1e-12), "within a chunk, the most promising first"
-    every = run._gain_bounds(draws)
+    every = run._judge(draws)[0]
     assert sorted(order) == sorted(np.flatnonzero(every > 0).tolist()), "exactly the draws that could save the least gain"
 
     run.drawn, run.pending, run.gains = 0, None, None
@@ -193,5 +222,5 @@ def test_random_shortcuts_are_attempted_most_promising_first():
     run.gains = None
     k2 = run.next_draw(draws)
     left = np.delete(np.arange(CHUNK), k)
-    again = run._gain_bounds(draws[left])
+    again = run._judge(draws[left])[0]
     assert k2 == left[int(np.argmax(again))]

@@ -57,10 +57,11 @@ def fixed_time(d: np.ndarray, v0: np.ndarray, v1: np.ndarray, vmax: np.ndarray, 
     return np.where(still, 0.0, a), np.where(still, v0, vc), ok
 
 
-def ramp(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
-         within: float = np.inf) -> Trajectory | None:
-    """The synchronised ramp from (q0, v0) to (q1, v1): duration set by the slowest joint (see the module); None when
-    no duration tried admits a ramp for every joint, or none shorter than `within`."""
+def plan(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+         within: float = np.inf) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """(duration T, per joint acceleration and cruising velocity) of the synchronised ramp from (q0, v0) to (q1, v1):
+    T set by the slowest joint (see the module); None when no duration tried admits a ramp for every joint, or none
+    shorter than `within`."""
     d = q1 - q0
     fastest = float(np.max(min_times(d, v0, v1, vmax, amax), initial=0.0))
     if not fastest < within or fastest <= TINY:  # too slow, or the same state: nothing to move
@@ -71,34 +72,74 @@ def ramp(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, vmax: n
         T = fastest * stretch
         a, vc, ok = fixed_time(d, v0, v1, vmax, amax, T)
         if ok.all():
-            return _pieces(q0, v0, q1, v1, a, vc, T)
+            return T, a, vc
     return None
 
 
-def _pieces(q0, v0, q1, v1, a, vc, T: float) -> Trajectory:
-    """The ramps (per joint: accelerate to vc, cruise, accelerate to v1) as one piecewise-parabolic trajectory."""
+def first_plans(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+                within: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`plan` for many ramps at once (rows), at their slowest joint's shortest duration only: (T, a, vc, planned),
+    planned False where that duration admits no ramp for every joint or is not shorter than `within` (`plan` may
+    then still find a longer one)."""
+    d = q1 - q0
+    fastest = np.max(min_times(d, v0, v1, vmax, amax), axis=-1, initial=0.0)
+    T = np.where(np.isfinite(fastest) & (fastest > TINY), fastest, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a, vc, ok = fixed_time(d, v0, v1, vmax, amax, T[..., None])
+    return T, a, vc, (fastest < within) & (fastest > TINY) & ok.all(axis=-1)
+
+
+def moving(v0: np.ndarray, v1: np.ndarray, a: np.ndarray, vc: np.ndarray) -> np.ndarray:
+    """The joints a planned ramp moves (its every other joint stays at rest throughout)."""
+    return (v0 != 0) | (v1 != 0) | (vc != 0) | (a > 0)
+
+
+def positions(q0: np.ndarray, v0: np.ndarray, v1: np.ndarray, a: np.ndarray, vc: np.ndarray, T: np.ndarray | float,
+              taus: np.ndarray) -> np.ndarray:
+    """A planned ramp's positions at times `taus` (shape (..., k), from its start) in closed form: (..., k, n)."""
+    q0, v0, v1, a, vc = (np.asarray(x)[..., None, :] for x in (q0, v0, v1, a, vc))
+    return _state(_profile(q0, v0, v1, a, vc), q0, v0, vc, np.asarray(T, float)[..., None, None],
+                  np.asarray(taus, float)[..., :, None])[0]
+
+
+def ramp(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+         within: float = np.inf) -> Trajectory | None:
+    """The synchronised ramp from (q0, v0) to (q1, v1) (see `plan`) as a trajectory; None where `plan` finds none."""
+    planned = plan(q0, v0, q1, v1, vmax, amax, within)
+    return None if planned is None else pieces(q0, v0, q1, v1, planned[1], planned[2], planned[0])
+
+
+def _profile(q0, v0, v1, a, vc) -> tuple:
+    """Per joint: the first ramp's and the last ramp's durations and accelerations, the position the first ends at."""
     safe = np.where(a > 0, a, 1.0)
     t1 = np.where(a > 0, np.abs(vc - v0) / safe, 0.0)
     t2 = np.where(a > 0, np.abs(v1 - vc) / safe, 0.0)
     s1, s2 = np.sign(vc - v0) * a, np.sign(v1 - vc) * a
+    return t1, t2, s1, s2, q0 + v0 * t1 + 0.5 * s1 * t1**2
+
+
+def _state(profile: tuple, q0, v0, vc, T, tau) -> tuple[np.ndarray, np.ndarray]:
+    """(positions, velocities) at times tau (broadcast against the joints) of the ramps `profile` describes."""
+    t1, t2, s1, s2, pos0 = profile
+    first = tau < t1
+    last = tau > T - t2
+    late = tau - (T - t2)
+    q = np.where(first, q0 + v0 * tau + 0.5 * s1 * tau**2,
+                 np.where(last, pos0 + vc * (T - t2 - t1) + vc * late + 0.5 * s2 * late**2, pos0 + vc * (tau - t1)))
+    v = np.where(first, v0 + s1 * tau, np.where(last, vc + s2 * late, vc))
+    return q, v
+
+
+def pieces(q0, v0, q1, v1, a, vc, T: float) -> Trajectory:
+    """The ramps (per joint: accelerate to vc, cruise, accelerate to v1) as one piecewise-parabolic trajectory."""
+    profile = _profile(q0, v0, v1, a, vc)
+    t1, t2, s1, s2, _ = profile
     cuts = np.unique(np.clip(np.concatenate([[0.0, T], t1, T - t2]), 0.0, T))
     cuts = cuts[np.concatenate([[True], np.diff(cuts) > 1e-9])]
     cuts[-1] = T
     starts = cuts[:-1]
     mids = 0.5 * (cuts[:-1] + cuts[1:])
-    pos0 = q0 + v0 * t1 + 0.5 * s1 * t1**2  # at the end of the first ramp
-
-    def state(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        tau = tau[:, None]
-        first = tau < t1
-        last = tau > T - t2
-        late = tau - (T - t2)
-        q = np.where(first, q0 + v0 * tau + 0.5 * s1 * tau**2,
-                     np.where(last, pos0 + vc * (T - t2 - t1) + vc * late + 0.5 * s2 * late**2, pos0 + vc * (tau - t1)))
-        v = np.where(first, v0 + s1 * tau, np.where(last, vc + s2 * late, vc))
-        return q, v
-
-    q, v = state(starts)
+    q, v = _state(profile, q0, v0, vc, T, starts[:, None])
     tm = mids[:, None]
     acc = np.where(tm < t1, s1, np.where(tm > T - t2, s2, 0.0))
     return Trajectory(cuts, q, v, acc, q1.copy())

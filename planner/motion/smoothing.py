@@ -26,7 +26,7 @@ import numpy as np
 from planner.collision.situation import Situation
 from planner.collision.validity import Validity
 from planner.motion.piece import TRANSIT_PARTS, Piece
-from planner.motion.ramps import TINY, min_times, ramp
+from planner.motion.ramps import TINY, first_plans, min_times, moving, pieces, plan, positions
 from planner.motion.runs import ends_run, run_key, runs, starts_run
 from planner.motion.tentative import Outcome, Survivors
 from planner.motion.trajectory import Trajectory, rest_to_rest
@@ -191,7 +191,7 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
     run.current = 2
     k = run.next_draw(draws)
     while k is not None and run.checks < budget:
-        if run.attempt(*np.sort(draws[k] * run.traj.duration)):
+        if run.attempt(*np.sort(draws[k] * run.traj.duration), run.judged.get(k)):
             run.gains = None  # the trajectory changed: the draws left are judged again on the new one
         k = run.next_draw(draws)
 
@@ -230,7 +230,8 @@ class _Run:
         self.marks = np.zeros(0)
         self.drawn = 0  # the random pass: the draws its chunks have taken so far,
         self.pending: np.ndarray | None = None  # the chunk's draws not attempted yet,
-        self.gains: np.ndarray | None = None  # and the most each could save (None: to judge on the trajectory as it is)
+        self.gains: np.ndarray | None = None  # and the most each could save (None: to judge on the trajectory as it is),
+        self.judged: dict[int, tuple] = {}  # with, by draw, its ramp as judged (see _try's `known`)
 
     def validities(self, t1: float, t2: float, ramp_moves: np.ndarray) -> tuple[Validity, ...] | None:
         """What checks a ramp from t1 to t2: its piece's own validity, or the blend of the pieces it spans (also for one
@@ -262,7 +263,8 @@ class _Run:
                 self.pending, self.gains = np.arange(self.drawn, min(self.drawn + CHUNK, len(draws))), None
                 self.drawn += CHUNK
             if self.gains is None:
-                self.gains = self._gain_bounds(draws[self.pending])
+                self.gains, known = self._judge(draws[self.pending])
+                self.judged = dict(zip(self.pending.tolist(), known))
                 keep = self.gains > 0
                 self.pending, self.gains = self.pending[keep], self.gains[keep]
                 continue
@@ -271,15 +273,23 @@ class _Run:
             self.pending, self.gains = np.delete(self.pending, best), np.delete(self.gains, best)
             return k
 
-    def _gain_bounds(self, draws: np.ndarray) -> np.ndarray:
-        """Per draw, the most a ramp between its two times could save (0 where it cannot save the least gain)."""
+    def _judge(self, draws: np.ndarray) -> tuple[np.ndarray, list[tuple | None]]:
+        """Per draw, the most a ramp between its two times could save (0 where it cannot save the least gain), and its
+        ramp as `_try` needs it (`known`), planned with the others at once where the slowest joint's shortest duration
+        admits it (else None: `_try` plans it alone)."""
         p = self.smoother
         times = np.sort(draws * self.traj.duration, axis=1)
         (qa, va), (qb, vb) = (self.traj.states(times[:, i]) for i in (0, 1))
         span = times[:, 1] - times[:, 0]
         fastest = min_times(qb - qa, va, vb, p.vmax, p.amax).max(axis=1, initial=0.0)
         hopeful = (span - p.min_gain > fastest) & (fastest > TINY)
-        return np.where(hopeful, span - fastest, 0.0)
+        T, a, vc, planned = first_plans(qa, va, qb, vb, p.vmax, p.amax, span - p.min_gain)
+        known: list[tuple | None] = [None] * len(draws)
+        rows = np.flatnonzero(planned & hopeful)
+        probes = positions(qa[rows], va[rows], vb[rows], a[rows], vc[rows], T[rows], T[rows, None] * np.array(PROBES))
+        for i, at in zip(rows.tolist(), probes):
+            known[i] = (qa[i], va[i], qb[i], vb[i], (float(T[i]), a[i], vc[i]), at)
+        return np.where(hopeful, span - fastest, 0.0), known
 
     @property
     def checks(self) -> int:
@@ -287,7 +297,7 @@ class _Run:
         replay follows the same course) and what the surviving shortcuts' checks could make."""
         return self.screens + self.survivors.reserved
 
-    def attempt(self, t1: float, t2: float) -> bool:
+    def attempt(self, t1: float, t2: float, known: tuple | None = None) -> bool:
         """Whether the ramp from the state at t1 to the one at t2 is faster and passes its screen, or did so when this
         attempt was made before (replayed while the attempts are those made before); then it replaces that span, and
         the pieces' ends and the marks are mapped onto the new timing."""
@@ -295,7 +305,7 @@ class _Run:
         out = self.record[seq] if seq < len(self.record) and self.record[seq].times == (t1, t2) else None
         if out is None or (out.shortcut is not None and not out.whole and out.most > self._left()):  # no longer a replay
             self.record = self.record[:seq]
-            out = self._try(t1, t2)
+            out = self._try(t1, t2, known)
             self.made[self.current] += 1
         self.log.append(out)
         self.screens += out.checks
@@ -328,25 +338,31 @@ class _Run:
         """The checks the budget has left beyond those made and those held back for the surviving shortcuts."""
         return self.budget - self.spent - self.survivors.reserved
 
-    def _try(self, t1: float, t2: float) -> Outcome:
+    def _try(self, t1: float, t2: float, known: tuple | None = None) -> Outcome:
         """A new attempt (see attempt). A ramp's probes (PROBES: its middle, then its quarters) are checked first, each
-        while the budget has room for it: a ramp through a colliding configuration is refused before its curve's checks
-        are planned. Then it is screened while the budget has left what its screen and its whole check could need (the
-        surviving shortcuts' checks made at once first, should what they hold back leave less); else it is checked
-        whole, as far as its whole check fits, else not tried."""
+        while the budget has room for it: a ramp through a colliding configuration is refused before it is made and its
+        curve's checks are planned. Then it is screened while the budget has left what its screen and its whole check
+        could need (the surviving shortcuts' checks made at once first, should what they hold back leave less); else it
+        is checked whole, as far as its whole check fits, else not tried. `known`: the ramp's ends, plan (ramps.plan)
+        and probes, when judged with its chunk of draws on the trajectory as it is."""
         p, refused = self.smoother, Outcome((t1, t2))
         if t2 - t1 <= p.min_gain:
             return refused
-        (qa, qb), (va, vb) = self.traj.states(np.array([t1, t2]))
-        shortcut = ramp(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
-        if shortcut is None:
-            return refused
-        validities = self.validities(t1, t2, np.any(shortcut.v != 0, axis=0) | np.any(shortcut.a != 0, axis=0))
+        if known is None:
+            (qa, qb), (va, vb) = self.traj.states(np.array([t1, t2]))
+            planned = plan(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
+            if planned is None:
+                return refused
+            probes = positions(qa, va, vb, planned[1], planned[2], planned[0], np.array(PROBES) * planned[0])
+        else:
+            qa, va, qb, vb, planned, probes = known
+        T, a, vc = planned
+        validities = self.validities(t1, t2, moving(va, vb, a, vc))
         if validities is None or len(validities) > self._left():
             return refused
         before = sum(v.checks for v in validities)
         clear = True
-        for k, q in enumerate(shortcut.positions(np.array(PROBES) * shortcut.duration)):  # on the ramp: a collision refuses it
+        for k, q in enumerate(probes):  # on the ramp: a collision refuses it
             if k and len(validities) > self._left() - (sum(v.checks for v in validities) - before):
                 break
             clear = all(v.state_valid(q) for v in validities)
@@ -356,6 +372,7 @@ class _Run:
         self.spent += first
         if not clear:
             return Outcome((t1, t2), None, validities, first, 0, True)
+        shortcut = pieces(qa, va, qb, vb, a, vc, T)
         most = sum(v.curve_checks(shortcut) for v in validities)
         if 2 * most > self._left() and self.survivors.reserved:  # what is held back is far more than the checks need
             failed = self.settle()
