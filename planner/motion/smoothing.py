@@ -4,12 +4,12 @@ The pieces are grouped into runs (runs.py): the robot comes to rest only between
 task's ends; fingers shaping before an approach, or opening at the end, may move while the arms do. A run starts
 timed rest to rest at every vertex (trajectory.py): exactly the checked polylines. Then, drawn from the run's
 random stream (from the plan's and the run's pieces), two times t1 < t2 of the run are joined by the time-optimal
-ramp between the states (positions and velocities) there (ramps.py); where it is faster, its middle and quarter
-configurations are free (PROBES: checked before any of its curve's checks is planned, most ramps that fail fail
-there) and its curve passes a screen (its first checks: segments.py), it replaces that span, and the rest of its
-checks are made at the end, where it survives later shortcuts (tentative.py: the same displacement bound between
-checks as a straight segment; should one fail, that attempt is refused and the run smoothed again, the attempts
-before it replayed, the new ones checked whole). Inside one piece it is checked with that piece's own validity (a
+ramp between the states (positions and velocities) there (ramps.py); where it is faster, its configurations at
+its middle, quarters and eighths are free (PROBES: checked before it is made, most ramps that fail fail there) and
+its curve passes a screen (its first checks: segments.py), it replaces that span, and the rest of its checks are
+made at the end, where it survives later shortcuts (tentative.py: the same displacement bound between checks as a
+straight segment; should one fail, that attempt is refused and the run smoothed again, the attempts before it
+replayed, the new ones checked whole). Inside one piece it is checked with that piece's own validity (a
 transit's paddings fitted to its ends, a contact motion's tight paddings); across pieces (a lift into a transit, a
 transit into an approach) with the transit profile in the object's situation without its exceptions (no fingertip nor
 support may touch), fitted to the ramp's ends: a hand near the object keeps the straight contact motion. Budgets are
@@ -37,7 +37,8 @@ CORNERS = (0.5, 0.25, 0.1)  # a vertex's corner cut spans this share of the segm
 CORNER_ROUNDS = 2  # rounds of corner cuts: the second, between the first's ramps, joins them (docs/benchmarks.md)
 CHUNK = 256  # random shortcuts judged at once, the most promising attempted first
 PASSES = ("vertices", "corners", "random")  # the passes of `passes`, in their order
-PROBES = (0.5, 0.25, 0.75)  # a ramp's configurations checked before its curve's checks are planned, as shares of its duration
+PROBES = (0.5, 0.25, 0.75, 0.125, 0.625, 0.375, 0.875)  # a ramp's configurations checked before it is made, as shares
+# of its duration, coarse to fine (docs/benchmarks.md: most ramps that fail fail there, before their curve's set-up)
 
 
 @dataclass(frozen=True)
@@ -148,8 +149,9 @@ class Smoother:
         record: list[Outcome] = []
         checked: dict[int, list[tuple[float, float]]] = {}
         spent, made = 0, np.zeros(len(PASSES), dtype=int)
+        checks_of: dict[tuple[int, int, bool, bytes], tuple[Validity, ...]] = {}  # made once for every smoothing of the run
         while True:
-            run = _Run(self, *start, budget, record, Survivors(checked), spent, eager=bool(record))
+            run = _Run(self, *start, budget, record, Survivors(checked), spent, bool(record), checks_of)
             try:
                 passes(run, draws)
                 failed = run.settle()
@@ -209,7 +211,8 @@ class _Run:
     shortcut), the validities made so far and the figures."""
 
     def __init__(self, smoother: Smoother, pieces: list[Piece], traj: Trajectory, ends: np.ndarray, budget: int,
-                 record: list[Outcome], survivors: Survivors, spent: int, eager: bool):
+                 record: list[Outcome], survivors: Survivors, spent: int, eager: bool,
+                 checks_of: dict[tuple[int, int, bool, bytes], tuple[Validity, ...]]):
         self.smoother, self.pieces, self.traj, self.ends = smoother, pieces, traj, ends
         self.budget = budget  # the collision checks the smoothing may make
         self.record, self.log = record, []  # the outcomes to replay; this smoothing's
@@ -220,7 +223,7 @@ class _Run:
         self.moves = np.array([np.ptp(p.path, axis=0) > 0 for p in pieces])  # the joints each piece moves
         robot = smoother.validities.robot
         self.fingers = np.isin(np.arange(robot.nq), np.concatenate([robot.hand_idx[a] for a in robot.spec.arm_names]))
-        self.checks_of: dict[tuple[int, int, bool, bytes], tuple[Validity, ...]] = {}
+        self.checks_of = checks_of  # the validities of ramps by the pieces they span and the joints they move
         self.strict = next((p.situation for p in pieces if not p.situation.touching and not p.situation.support),
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
         self.shortcuts = 0
@@ -339,7 +342,7 @@ class _Run:
         return self.budget - self.spent - self.survivors.reserved
 
     def _try(self, t1: float, t2: float, known: tuple | None = None) -> Outcome:
-        """A new attempt (see attempt). A ramp's probes (PROBES: its middle, then its quarters) are checked first, each
+        """A new attempt (see attempt). A ramp's probes (PROBES: its middle, quarters, eighths) are checked first, each
         while the budget has room for it: a ramp through a colliding configuration is refused before it is made and its
         curve's checks are planned. Then it is screened while the budget has left what its screen and its whole check
         could need (the surviving shortcuts' checks made at once first, should what they hold back leave less); else it
