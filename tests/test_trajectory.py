@@ -107,7 +107,8 @@ def test_ramps_planned_at_once_are_the_ramps_made_one_by_one():
     still = rng.random((n, 3)) < 0.2  # joints a ramp leaves at rest
     q1[still], v0[still], v1[still] = 0.0, 0.0, 0.0
     within = np.where(rng.random(n) < 0.2, rng.uniform(0.0, 2.0, n), np.inf)
-    T, a, vc, planned = first_plans(q0, v0, q1, v1, vmax, amax, within)
+    fastest, T, a, vc, planned = first_plans(q0, v0, q1, v1, vmax, amax, within)
+    assert np.array_equal(fastest[planned], T[planned])
     taus = T[:, None] * np.array([0.5, 0.25, 0.75, 0.0, 1.0])
     at = positions(q0, v0, v1, a, vc, T, taus)
     stretched = 0  # ramps whose slowest joint's shortest duration is in another joint's inoperative interval

@@ -77,16 +77,16 @@ def plan(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, vmax: n
 
 
 def first_plans(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
-                within: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """`plan` for many ramps at once (rows), at their slowest joint's shortest duration only: (T, a, vc, planned),
-    planned False where that duration admits no ramp for every joint or is not shorter than `within` (`plan` may
-    then still find a longer one)."""
+                within: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`plan` for many ramps at once (rows), at their slowest joint's shortest duration only: (that duration, T, a, vc,
+    planned), planned False where that duration admits no ramp for every joint or is not shorter than `within` (`plan`
+    may then still find a longer one)."""
     d = q1 - q0
     fastest = np.max(min_times(d, v0, v1, vmax, amax), axis=-1, initial=0.0)
     T = np.where(np.isfinite(fastest) & (fastest > TINY), fastest, 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         a, vc, ok = fixed_time(d, v0, v1, vmax, amax, T[..., None])
-    return T, a, vc, (fastest < within) & (fastest > TINY) & ok.all(axis=-1)
+    return fastest, T, a, vc, (fastest < within) & (fastest > TINY) & ok.all(axis=-1)
 
 
 def moving(v0: np.ndarray, v1: np.ndarray, a: np.ndarray, vc: np.ndarray) -> np.ndarray:

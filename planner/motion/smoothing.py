@@ -178,7 +178,9 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
                          + [run.traj.duration])  # the vertices, where the robot rests
     i = 0
     while i < len(run.marks) - 2 and run.checks < budget:
-        j = next((j for j in range(len(run.marks) - 1, i + 1, -1) if run.attempt(run.marks[i], run.marks[j])), None)
+        far = np.arange(len(run.marks) - 1, i + 1, -1)  # the farthest first, their ramps planned at once
+        _, known = run.planned(np.full(len(far), run.marks[i]), run.marks[far])
+        j = next((int(j) for j, k in zip(far, known) if run.attempt(run.marks[i], run.marks[j], k)), None)
         if j is not None:
             run.marks = np.delete(run.marks, np.arange(i + 1, j))
         i += 1
@@ -278,21 +280,26 @@ class _Run:
 
     def _judge(self, draws: np.ndarray) -> tuple[np.ndarray, list[tuple | None]]:
         """Per draw, the most a ramp between its two times could save (0 where it cannot save the least gain), and its
-        ramp as `_try` needs it (`known`), planned with the others at once where the slowest joint's shortest duration
-        admits it (else None: `_try` plans it alone)."""
-        p = self.smoother
+        ramp as planned (see `planned`)."""
         times = np.sort(draws * self.traj.duration, axis=1)
-        (qa, va), (qb, vb) = (self.traj.states(times[:, i]) for i in (0, 1))
+        fastest, known = self.planned(times[:, 0], times[:, 1])
         span = times[:, 1] - times[:, 0]
-        fastest = min_times(qb - qa, va, vb, p.vmax, p.amax).max(axis=1, initial=0.0)
-        hopeful = (span - p.min_gain > fastest) & (fastest > TINY)
-        T, a, vc, planned = first_plans(qa, va, qb, vb, p.vmax, p.amax, span - p.min_gain)
-        known: list[tuple | None] = [None] * len(draws)
-        rows = np.flatnonzero(planned & hopeful)
+        hopeful = (span - self.smoother.min_gain > fastest) & (fastest > TINY)
+        return np.where(hopeful, span - fastest, 0.0), known
+
+    def planned(self, t1: np.ndarray, t2: np.ndarray) -> tuple[np.ndarray, list[tuple | None]]:
+        """(the slowest joint's shortest move of the ramps from the states at t1 to those at t2, on the trajectory as it
+        is; each ramp as `_try` needs it (`known`), planned with the others at once where that duration admits one
+        shorter than its span less the least gain, else None: `_try` plans it alone)."""
+        p = self.smoother
+        (qa, va), (qb, vb) = self.traj.states(t1), self.traj.states(t2)
+        fastest, T, a, vc, planned = first_plans(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
+        known: list[tuple | None] = [None] * len(t1)
+        rows = np.flatnonzero(planned)
         probes = positions(qa[rows], va[rows], vb[rows], a[rows], vc[rows], T[rows], T[rows, None] * np.array(PROBES))
         for i, at in zip(rows.tolist(), probes):
             known[i] = (qa[i], va[i], qb[i], vb[i], (float(T[i]), a[i], vc[i]), at)
-        return np.where(hopeful, span - fastest, 0.0), known
+        return fastest, known
 
     @property
     def checks(self) -> int:
