@@ -333,25 +333,27 @@ class CollisionChecker:
         self.pair_tests += first.count
         if not hit or screen is None:
             return hit
-        return self._past_screens(gd, manager, screen)
+        return self._past_screens(gd, manager, screen, subset)
 
-    def _past_screens(self, gd: pin.GeometryData, manager, screen: Screen) -> bool:
+    def _past_screens(self, gd: pin.GeometryData, manager, screen: Screen, subset: str | np.ndarray) -> bool:
         """After a hit: whether the subset's own pairs collide. A screening pair hit (the object's hull, which holds its
-        mesh) is answered by its twin, tested alone; should the twin miss, one more broad-phase pass collects every
-        pair whose boxes overlap (no exact test), and those are tested one by one, a screening pair by its hull, then
-        its twin (a hand's fingers inside the hull it just let go of overlap it pair after pair: one pass, not one per
-        pair)."""
+        mesh) is answered by its twin, tested alone. Should the twin miss, the hull has failed as a screen there (a
+        hand's fingers in a pocket of the hull, near the object they let go of or close on): the twin takes its place
+        in the subset's table from then on (_demote), and one more broad-phase pass collects every pair whose boxes
+        overlap (no exact test), tested one by one, a screening pair by its hull, then its twin."""
         gm, k = self.cm.geometry, self._first.collisionPairIndex
         if not screen.screening[k]:
             return True
+        twin = int(self.cm.twins[k])
         self.pair_tests += 1
-        if pin.computeCollision(gm, gd, int(self.cm.twins[k])):
+        if pin.computeCollision(gm, gd, twin):
             return True
+        self._demote(subset, k, twin)
         if self._collect is None:
             self._collect = pin.CollisionCallBackCollect(gm, gd)
         pin.computeCollisions(manager, self._collect)
         for j in self._collect.pair_indexes:
-            if j == k:
+            if j == k or j == twin:
                 continue
             self.pair_tests += 1
             if not pin.computeCollision(gm, gd, int(j)):
@@ -362,6 +364,21 @@ class CollisionChecker:
             if pin.computeCollision(gm, gd, int(self.cm.twins[j])):
                 return True
         return False
+
+    def _demote(self, subset: str | np.ndarray, k: int, twin: int) -> None:
+        """The subset's screening pair k checked as its twin from now on, in this checker (the table copied once): the
+        same answers, one exact test where the hull would take it, its twin's and a pass more."""
+        key = subset if isinstance(subset, str) else id(subset)
+        pairs, screen, table = self._tables[key]
+        if screen is not None and table is screen.screened:
+            table = table.copy()
+            self._tables[key] = (pairs, screen, table)
+        for pair, on in ((k, False), (twin, True)):
+            a, b = self.cm.ends[pair]
+            table[a, b] = table[b, a] = on
+        self._gd.deactivateCollisionPair(k)
+        self._gd.activateCollisionPair(twin)
+        self._active = table
 
     def colliding(self, q: np.ndarray, subset: str | np.ndarray = "all", margins: np.ndarray | None = None) -> list[int]:
         """Every pair of the subset colliding at q (no broad phase, no screen: each pair tested), padded as `margins` says
