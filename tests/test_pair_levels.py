@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.collision.checker import pair_table
+from planner.collision.pair_tables import pair_table
 from planner.collision.schedule import level_order
 from planner.collision.segments import FEW_PAIRS, LEVEL_SUBSETS, MAX_LEVEL, SegmentChecker
 from planner.motion.ramps import ramp

@@ -45,7 +45,8 @@ from typing import Protocol
 
 import numpy as np
 
-from planner.collision.checker import CollisionChecker, CollisionModel, pair_table
+from planner.collision.checker import CollisionChecker, CollisionModel
+from planner.collision.pair_tables import pair_table
 from planner.collision.schedule import bisection_indices, bounding, coarse_first, level_order
 
 

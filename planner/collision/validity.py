@@ -16,7 +16,8 @@ from typing import Protocol
 
 import numpy as np
 
-from planner.collision.checker import CollisionChecker, CollisionModel, pair_table
+from planner.collision.checker import CollisionChecker, CollisionModel
+from planner.collision.pair_tables import pair_table
 from planner.collision.schedule import two_level
 from planner.collision.segments import FEW_PAIRS, Curve, SegmentChecker, geometry_radii
 from planner.core.errors import RegraspError

@@ -143,3 +143,19 @@ def pieces(q0, v0, q1, v1, a, vc, T: float) -> Trajectory:
     tm = mids[:, None]
     acc = np.where(tm < t1, s1, np.where(tm > T - t2, s2, 0.0))
     return Trajectory(cuts, q, v, acc, q1.copy())
+
+
+def between(traj: Trajectory, t1: np.ndarray, t2: np.ndarray, vmax: np.ndarray, amax: np.ndarray, min_gain: float,
+            shares: np.ndarray) -> tuple[np.ndarray, list[tuple | None]]:
+    """(per ramp from the trajectory's state at t1 to its state at t2, its slowest joint's shortest move; each ramp as
+    a smoothing attempt needs it: its ends' positions and velocities, its plan and its positions at `shares` of its
+    duration, planned with the others at once where that duration admits one shorter than t2 - t1 - min_gain, else
+    None: the attempt plans it alone)."""
+    (qa, va), (qb, vb) = traj.states(t1), traj.states(t2)
+    fastest, T, a, vc, planned = first_plans(qa, va, qb, vb, vmax, amax, t2 - t1 - min_gain)
+    known: list[tuple | None] = [None] * len(t1)
+    rows = np.flatnonzero(planned)
+    at = positions(qa[rows], va[rows], vb[rows], a[rows], vc[rows], T[rows], T[rows, None] * shares)
+    for i, probes in zip(rows.tolist(), at):
+        known[i] = (qa[i], va[i], qb[i], vb[i], (float(T[i]), a[i], vc[i]), probes)
+    return fastest, known

@@ -26,7 +26,7 @@ import numpy as np
 from planner.collision.situation import Situation
 from planner.collision.validity import Validity
 from planner.motion.piece import TRANSIT_PARTS, Piece
-from planner.motion.ramps import TINY, first_plans, min_times, moving, pieces, plan, positions
+from planner.motion.ramps import TINY, between, min_times, moving, pieces, plan, positions
 from planner.motion.runs import ends_run, run_key, runs, starts_run
 from planner.motion.tentative import Outcome, Survivors
 from planner.motion.trajectory import Trajectory, rest_to_rest
@@ -179,7 +179,9 @@ def passes(run: "_Run", draws: np.ndarray) -> None:
     i = 0
     while i < len(run.marks) - 2 and run.checks < budget:
         far = np.arange(len(run.marks) - 1, i + 1, -1)  # the farthest first, their ramps planned at once
-        _, known = run.planned(np.full(len(far), run.marks[i]), run.marks[far])
+        p = run.smoother
+        _, known = between(run.traj, np.full(len(far), run.marks[i]), run.marks[far], p.vmax, p.amax, p.min_gain,
+                           np.array(PROBES))
         j = next((int(j) for j, k in zip(far, known) if run.attempt(run.marks[i], run.marks[j], k)), None)
         if j is not None:
             run.marks = np.delete(run.marks, np.arange(i + 1, j))
@@ -280,26 +282,13 @@ class _Run:
 
     def _judge(self, draws: np.ndarray) -> tuple[np.ndarray, list[tuple | None]]:
         """Per draw, the most a ramp between its two times could save (0 where it cannot save the least gain), and its
-        ramp as planned (see `planned`)."""
+        ramp as planned (ramps.between)."""
         times = np.sort(draws * self.traj.duration, axis=1)
-        fastest, known = self.planned(times[:, 0], times[:, 1])
-        span = times[:, 1] - times[:, 0]
-        hopeful = (span - self.smoother.min_gain > fastest) & (fastest > TINY)
-        return np.where(hopeful, span - fastest, 0.0), known
-
-    def planned(self, t1: np.ndarray, t2: np.ndarray) -> tuple[np.ndarray, list[tuple | None]]:
-        """(the slowest joint's shortest move of the ramps from the states at t1 to those at t2, on the trajectory as it
-        is; each ramp as `_try` needs it (`known`), planned with the others at once where that duration admits one
-        shorter than its span less the least gain, else None: `_try` plans it alone)."""
         p = self.smoother
-        (qa, va), (qb, vb) = self.traj.states(t1), self.traj.states(t2)
-        fastest, T, a, vc, planned = first_plans(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
-        known: list[tuple | None] = [None] * len(t1)
-        rows = np.flatnonzero(planned)
-        probes = positions(qa[rows], va[rows], vb[rows], a[rows], vc[rows], T[rows], T[rows, None] * np.array(PROBES))
-        for i, at in zip(rows.tolist(), probes):
-            known[i] = (qa[i], va[i], qb[i], vb[i], (float(T[i]), a[i], vc[i]), at)
-        return fastest, known
+        fastest, known = between(self.traj, times[:, 0], times[:, 1], p.vmax, p.amax, p.min_gain, np.array(PROBES))
+        span = times[:, 1] - times[:, 0]
+        hopeful = (span - p.min_gain > fastest) & (fastest > TINY)
+        return np.where(hopeful, span - fastest, 0.0), known
 
     @property
     def checks(self) -> int:
@@ -354,7 +343,7 @@ class _Run:
         curve's checks are planned. Then it is screened while the budget has left what its screen and its whole check
         could need (the surviving shortcuts' checks made at once first, should what they hold back leave less); else it
         is checked whole, as far as its whole check fits, else not tried. `known`: the ramp's ends, plan (ramps.plan)
-        and probes, when judged with its chunk of draws on the trajectory as it is."""
+        and probes, when planned with others at once on the trajectory as it is (ramps.between)."""
         p, refused = self.smoother, Outcome((t1, t2))
         if t2 - t1 <= p.min_gain:
             return refused
