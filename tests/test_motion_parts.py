@@ -869,7 +869,8 @@ def test_the_hull_screen_changes_no_answer(example):
     model without the screen: along the example's Carry (the object held), and with the statuette standing where a
     fingertip of the Carry's first configuration lies in a pocket of its hull, centimetres from the statuette itself
     (pockets found by sampling the hull; the fingers then moved at random), so that some configurations hit the hull
-    and not the statuette (counted with a model whose object is the hull itself)."""
+    and not the statuette (counted with a model whose object is the hull itself); there, a pair padded by 10 m is found
+    colliding past the hull."""
     import coal
     import pinocchio as pin
 
@@ -904,9 +905,43 @@ def test_the_hull_screen_changes_no_answer(example):
             for subset in ("moving", "changed", "object"):
                 answer = plain.on(subset).state_valid(q)
                 assert screened.on(subset).state_valid(q) == answer, f"subset {subset}"
-                count += answer and not as_hull.on(subset).state_valid(q)
+                if answer and not as_hull.on(subset).state_valid(q):
+                    count += 1
+                    past_hull.append(padded_pairs_collide(screened.seg.cm, q, subset))
             assert screened.colliding_pairs(q) == plain.colliding_pairs(q)
         return count
+
+    def padded_pairs_collide(model, q, subset: str) -> int:
+        """At a configuration where a hull is hit and its mesh is free, each pair of the robot and the obstacles the
+        naive broad phase meets after that hull, padded by 10 m in a subset of the two, collides: how many checks found
+        it past the hull (whose mesh pair then takes its place, `_demote`)."""
+        from planner.collision.checker import CollisionChecker
+        from planner.collision.pair_tables import pair_table
+
+        def spied():
+            checker, demoted = CollisionChecker(model), []
+            demote = checker._demote
+            checker._demote = lambda *args: (demoted.append(args[1]), demote(*args))
+            return checker, demoted
+
+        checker, hull_hit = spied()
+        assert not checker.in_collision(q, subset) and hull_hit
+        k = hull_hit[0]
+        twin = int(model.twins[k])
+        held = np.union1d(model.ends[k], model.ends[twin])  # the object's mesh and hull
+        others = np.flatnonzero(~np.isin(model.ends, held).any(axis=1))
+        later = others[model.ends[others, 0] > model.ends[k, 0]]  # the naive broad phase's order
+        paddings, past = model.paddings(), 0
+        for j in later[:: max(1, len(later) // 20)]:
+            checker, demoted = spied()
+            padded = paddings.copy()
+            padded[j] = 10.0
+            assert checker.in_collision(q, np.array([min(twin, j), max(twin, j)]), margins=pair_table(model, padded)), \
+                f"pair {j}, padded by 10 m"
+            past += bool(demoted)
+        return past
+
+    past_hull: list[int] = []
 
     q = motion.q[carry[0]]
     hold = np.linalg.inv(motion.object_pose[carry[0]]) @ planner.arms.palm(q, arm)
@@ -929,6 +964,7 @@ def test_the_hull_screen_changes_no_answer(example):
         pose[:3, :3], pose[:3, 3] = rotation, tip - rotation @ pocket
         found += hull_only(Situation(None, pose), moved)
     assert found, "some configurations must hit the hull and not the statuette"
+    assert sum(past_hull) > 0, "some padded pairs must be found past a hull hit whose mesh is free"
 
 
 def _hull_pockets(mesh, clearance: float, rng: np.random.Generator) -> np.ndarray:
