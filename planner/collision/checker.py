@@ -300,7 +300,7 @@ class CollisionChecker:
         mesh) is answered by its twin, tested alone. Should the twin miss, the hull has failed as a screen there (a
         hand's fingers in a pocket of the hull, near the object they let go of or close on): the twin takes its place
         in the subset's table from then on (_demote), and one more broad-phase pass collects every pair whose boxes
-        overlap (no exact test), tested one by one, a screening pair by its hull, then its twin."""
+        overlap (no exact test), tested one by one, a screening pair by its hull, then its twin (and demoted alike)."""
         gm, k = self.cm.geometry, self._first.collisionPairIndex
         if not screen.screening[k]:
             return True
@@ -320,9 +320,11 @@ class CollisionChecker:
                 continue
             if not screen.screening[j]:
                 return True
+            other = int(self.cm.twins[j])
             self.pair_tests += 1
-            if pin.computeCollision(gm, gd, int(self.cm.twins[j])):
+            if pin.computeCollision(gm, gd, other):
                 return True
+            self._demote(subset, int(j), other)  # this hull failed as a screen too
         return False
 
     def _demote(self, subset: str | np.ndarray, k: int, twin: int) -> None:

@@ -10,6 +10,8 @@ ramp none admits is not made.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from planner.motion.trajectory import Trajectory
@@ -145,17 +147,28 @@ def pieces(q0, v0, q1, v1, a, vc, T: float) -> Trajectory:
     return Trajectory(cuts, q, v, acc, q1.copy())
 
 
+class Planned(NamedTuple):
+    """A ramp planned, not yet made: its ends' states, its plan (`plan`: T, a, vc) and its positions at some shares of
+    its duration (the probes a smoothing attempt checks before it makes the ramp: `pieces`)."""
+
+    qa: np.ndarray
+    va: np.ndarray
+    qb: np.ndarray
+    vb: np.ndarray
+    plan: tuple[float, np.ndarray, np.ndarray]
+    probes: np.ndarray
+
+
 def between(traj: Trajectory, t1: np.ndarray, t2: np.ndarray, vmax: np.ndarray, amax: np.ndarray, min_gain: float,
-            shares: np.ndarray) -> tuple[np.ndarray, list[tuple | None]]:
-    """(per ramp from the trajectory's state at t1 to its state at t2, its slowest joint's shortest move; each ramp as
-    a smoothing attempt needs it: its ends' positions and velocities, its plan and its positions at `shares` of its
-    duration, planned with the others at once where that duration admits one shorter than t2 - t1 - min_gain, else
-    None: the attempt plans it alone)."""
+            shares: np.ndarray) -> tuple[np.ndarray, list[Planned | None]]:
+    """(per ramp from the trajectory's state at t1 to its state at t2, its slowest joint's shortest move; each ramp
+    planned with its positions at `shares` of its duration, at once with the others where that duration admits one
+    shorter than t2 - t1 - min_gain, else None: a smoothing attempt plans it alone)."""
     (qa, va), (qb, vb) = traj.states(t1), traj.states(t2)
     fastest, T, a, vc, planned = first_plans(qa, va, qb, vb, vmax, amax, t2 - t1 - min_gain)
-    known: list[tuple | None] = [None] * len(t1)
+    known: list[Planned | None] = [None] * len(t1)
     rows = np.flatnonzero(planned)
     at = positions(qa[rows], va[rows], vb[rows], a[rows], vc[rows], T[rows], T[rows, None] * shares)
     for i, probes in zip(rows.tolist(), at):
-        known[i] = (qa[i], va[i], qb[i], vb[i], (float(T[i]), a[i], vc[i]), probes)
+        known[i] = Planned(qa[i], va[i], qb[i], vb[i], (float(T[i]), a[i], vc[i]), probes)
     return fastest, known

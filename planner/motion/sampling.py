@@ -43,10 +43,10 @@ def sample(pieces: list[Piece], smoother: Smoother, dt: float, made: dict[tuple,
     budgets = {i: smoother.budget(run) for i, run in enumerate(grouped) if i not in done}
 
     busy = sorted((i for i, b in budgets.items() if any(b)), key=lambda i: -budgets[i][1])  # the longest work first
-    smooth = (forked_map if len(busy) > 1 else map)(smoother.smooth_run, [grouped[i] for i in busy])
+    smooth = (forked_map if len(busy) > 1 else map)(lambda i: smoother.smooth_run(grouped[i], budgets[i]), busy)
     done.update(zip(busy, smooth))
     for i in budgets.keys() - done.keys():  # no budget: timed rest to rest, nothing to fork for
-        done[i] = smoother.smooth_run(grouped[i])
+        done[i] = smoother.smooth_run(grouped[i], budgets[i])
     for smoothed in (done[i] for i in range(len(grouped))):
         if smoothed.trajectory is None:
             continue

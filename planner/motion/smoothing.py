@@ -26,7 +26,7 @@ import numpy as np
 from planner.collision.situation import Situation
 from planner.collision.validity import Validity
 from planner.motion.piece import TRANSIT_PARTS, Piece
-from planner.motion.ramps import TINY, between, min_times, moving, pieces, plan, positions
+from planner.motion.ramps import TINY, Planned, between, min_times, moving, pieces, plan, positions
 from planner.motion.runs import ends_run, run_key, runs, starts_run
 from planner.motion.tentative import Outcome, Survivors
 from planner.motion.trajectory import Trajectory, rest_to_rest
@@ -90,9 +90,9 @@ class Smoother:
         digest = hashlib.blake2b(repr(run_key(pieces)).encode(), digest_size=8).digest()
         return np.random.default_rng([self.seed, int.from_bytes(digest, "little")])
 
-    def smooth_run(self, pieces: list[Piece]) -> "SmoothedRun":
-        """The run smoothed with its budget and its stream."""
-        return self.smooth(pieces, self.stream(pieces), *self.budget(pieces))
+    def smooth_run(self, pieces: list[Piece], budget: tuple[int, int] | None = None) -> "SmoothedRun":
+        """The run smoothed with its budget (`budget`, when computed already) and its stream."""
+        return self.smooth(pieces, self.stream(pieces), *(budget or self.budget(pieces)))
 
     def smooth_runs(self, pieces: list[Piece], owned: list[Piece], open_start: bool, open_end: bool
                     ) -> tuple[dict[tuple, "SmoothedRun"], float]:
@@ -238,7 +238,7 @@ class _Run:
         self.drawn = 0  # the random pass: the draws its chunks have taken so far,
         self.pending: np.ndarray | None = None  # the chunk's draws not attempted yet,
         self.gains: np.ndarray | None = None  # and the most each could save (None: to judge on the trajectory as it is),
-        self.judged: dict[int, tuple] = {}  # with, by draw, its ramp as judged (see _try's `known`)
+        self.judged: dict[int, Planned] = {}  # with, by draw, its ramp as planned then (ramps.between)
 
     def validities(self, t1: float, t2: float, ramp_moves: np.ndarray) -> tuple[Validity, ...] | None:
         """What checks a ramp from t1 to t2: its piece's own validity, or the blend of the pieces it spans (also for one
@@ -280,7 +280,7 @@ class _Run:
             self.pending, self.gains = np.delete(self.pending, best), np.delete(self.gains, best)
             return k
 
-    def _judge(self, draws: np.ndarray) -> tuple[np.ndarray, list[tuple | None]]:
+    def _judge(self, draws: np.ndarray) -> tuple[np.ndarray, list[Planned | None]]:
         """Per draw, the most a ramp between its two times could save (0 where it cannot save the least gain), and its
         ramp as planned (ramps.between)."""
         times = np.sort(draws * self.traj.duration, axis=1)
@@ -296,7 +296,7 @@ class _Run:
         replay follows the same course) and what the surviving shortcuts' checks could make."""
         return self.screens + self.survivors.reserved
 
-    def attempt(self, t1: float, t2: float, known: tuple | None = None) -> bool:
+    def attempt(self, t1: float, t2: float, known: Planned | None = None) -> bool:
         """Whether the ramp from the state at t1 to the one at t2 is faster and passes its screen, or did so when this
         attempt was made before (replayed while the attempts are those made before); then it replaces that span, and
         the pieces' ends and the marks are mapped onto the new timing."""
@@ -337,7 +337,7 @@ class _Run:
         """The checks the budget has left beyond those made and those held back for the surviving shortcuts."""
         return self.budget - self.spent - self.survivors.reserved
 
-    def _try(self, t1: float, t2: float, known: tuple | None = None) -> Outcome:
+    def _try(self, t1: float, t2: float, known: Planned | None = None) -> Outcome:
         """A new attempt (see attempt). A ramp's probes (PROBES: its middle, quarters, eighths) are checked first, each
         while the budget has room for it: a ramp through a colliding configuration is refused before it is made and its
         curve's checks are planned. Then it is screened while the budget has left what its screen and its whole check
@@ -352,10 +352,9 @@ class _Run:
             planned = plan(qa, va, qb, vb, p.vmax, p.amax, t2 - t1 - p.min_gain)
             if planned is None:
                 return refused
-            probes = positions(qa, va, vb, planned[1], planned[2], planned[0], np.array(PROBES) * planned[0])
-        else:
-            qa, va, qb, vb, planned, probes = known
-        T, a, vc = planned
+            known = Planned(qa, va, qb, vb, planned, positions(qa, va, vb, planned[1], planned[2], planned[0],
+                                                                np.array(PROBES) * planned[0]))
+        qa, va, qb, vb, (T, a, vc), probes = known
         validities = self.validities(t1, t2, moving(va, vb, a, vc))
         if validities is None or len(validities) > self._left():
             return refused
