@@ -302,29 +302,27 @@ class CollisionChecker:
         in the subset's table from then on (_demote), and one more broad-phase pass collects every pair whose boxes
         overlap (no exact test), tested one by one, a screening pair by its hull, then its twin (and demoted alike)."""
         gm, k = self.cm.geometry, self._first.collisionPairIndex
-        if not screen.screening[k]:
+        if not screen.screening[k] or self._twin_collides(gd, subset, k):
             return True
-        twin = int(self.cm.twins[k])
-        self.pair_tests += 1
-        if pin.computeCollision(gm, gd, twin):
-            return True
-        self._demote(subset, k, twin)
         if self._collect is None:
             self._collect = pin.CollisionCallBackCollect(gm, gd)
         pin.computeCollisions(manager, self._collect)
         for j in self._collect.pair_indexes:
-            if j == k or j == twin:
+            if j == k or j == self.cm.twins[k]:
                 continue
             self.pair_tests += 1
-            if not pin.computeCollision(gm, gd, int(j)):
-                continue
-            if not screen.screening[j]:
+            if pin.computeCollision(gm, gd, int(j)) and (not screen.screening[j] or self._twin_collides(gd, subset, int(j))):
                 return True
-            other = int(self.cm.twins[j])
-            self.pair_tests += 1
-            if pin.computeCollision(gm, gd, other):
-                return True
-            self._demote(subset, int(j), other)  # this hull failed as a screen too
+        return False
+
+    def _twin_collides(self, gd: pin.GeometryData, subset: str | np.ndarray, k: int) -> bool:
+        """Whether the twin of screening pair k (hit) collides; where it does not, the hull failed as a screen there
+        and its twin takes its place (_demote)."""
+        twin = int(self.cm.twins[k])
+        self.pair_tests += 1
+        if pin.computeCollision(self.cm.geometry, gd, twin):
+            return True
+        self._demote(subset, k, twin)
         return False
 
     def _demote(self, subset: str | np.ndarray, k: int, twin: int) -> None:
