@@ -669,10 +669,12 @@ def test_clearances_measure_exactly_the_pairs_nearer_than_far():
     assert measured > 100, "the configurations must bring many pairs near"
 
 
-def test_the_clearance_meter_measures_a_configuration_the_same_whatever_it_measured_before(example):
+def test_the_clearance_meter_measures_a_configuration_the_same_whatever_it_measured_before(example, monkeypatch):
     """Along the example's motion (hands near the vase, the object carried), a configuration measured again after five
     others gives the very same distances: what a fitted padding, and so the checks it spaces, is made of depends only on
-    the configuration (pinocchio's per-pair distance functors kept their GJK state and moved by up to 5e-7 m)."""
+    the configuration (pinocchio's per-pair distance functors kept their GJK state and moved by up to 5e-7 m). The
+    checker keeps one configuration's distances only, so each is measured again."""
+    from planner.collision import checker as checker_module
     from planner.collision.checker import build_collision_model
     from planner.collision.situation import Situation
     from planner.collision.validity import transit_profile
@@ -682,6 +684,7 @@ def test_the_clearance_meter_measures_a_configuration_the_same_whatever_it_measu
     from planner.motion.transit_stage import transit_joints
     from planner.motion.validities import Validities
 
+    monkeypatch.setattr(checker_module, "MEASURED", 1)
     scene, roadmap, _ = example
     m = Session.open(EXAMPLE).result("motion")
     robot, p = scene.robot, MotionParams()
@@ -699,6 +702,46 @@ def test_the_clearance_meter_measures_a_configuration_the_same_whatever_it_measu
         assert checks.meter(q) == first, k
         measured += len(first)
     assert measured > 50, "the samples must bring many pairs near"
+
+
+def test_meters_of_one_situation_measure_each_pair_once_per_configuration(example, monkeypatch):
+    """The clearance meters of one situation's motions (other moving joints, other pairs) share what their checker
+    measured: along the example's motion, a meter of the arms alone after one of the torso and arms measures no pair
+    again, and both give the distances a meter on a checker of its own gives (the oracle: nothing shared)."""
+    from planner.collision.checker import CollisionChecker, build_collision_model
+    from planner.collision.situation import Situation
+    from planner.collision.validity import Clearances, far, transit_profile
+    from planner.core.session import Session
+    from planner.motion.result import MotionParams
+    from planner.motion.step import contact_profile
+    from planner.motion.transit_stage import transit_joints
+    from planner.motion.validities import Validities
+
+    scene, roadmap, _ = example
+    m = Session.open(EXAMPLE).result("motion")
+    robot, p = scene.robot, MotionParams()
+    profile = transit_profile(roadmap.resolution, p.transit_env_padding, p.transit_self_padding)
+    validities = Validities(scene, build_collision_model(robot, scene.environment), profile, contact_profile(p))
+    arms = np.concatenate([robot.arm_idx[a] for a in robot.spec.arm_names])
+    made = []
+    monkeypatch.setattr(CollisionChecker, "distance", lambda self, pair, real=CollisionChecker.distance: made.append(pair)
+                        or real(self, pair))
+    rng = np.random.default_rng(1)
+    shared = 0
+    for k in rng.choice(len(m.q), 30, replace=False):
+        q, arm = m.q[k], robot.spec.arm_names[m.holder[k]] if m.holder[k] >= 0 else None
+        hold = m.object_pose[k] if arm is None else np.linalg.inv(robot.frame_placement(q, robot.palm_frame(arm))) @ m.object_pose[k]
+        whole, alone = (validities.of(Situation(arm, hold), q, idx) for idx in (transit_joints(robot), arms))
+        assert whole.checker is alone.checker
+        first = whole.meter(q)
+        before = len(made)
+        second = alone.meter(q)
+        assert set(made[before:]) <= set(alone.model.subsets["moving"]) - set(whole.model.subsets["moving"]), k
+        for near, cm in ((first, whole.model), (second, alone.model)):
+            fresh = Clearances(cm, "moving", far(profile), CollisionChecker(cm))(q)
+            assert near == fresh, k
+        shared += len(set(first) & set(second))
+    assert shared > 50, "the samples must bring pairs both meters measure near"
 
 
 @pytest.mark.parametrize("baseline", [False, True], ids=["roadmap", "rrt"])

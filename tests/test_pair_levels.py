@@ -11,7 +11,7 @@ import pytest
 
 from planner.collision.pair_tables import pair_table
 from planner.collision.schedule import level_order
-from planner.collision.segments import FEW_PAIRS, LEVEL_SUBSETS, MAX_LEVEL, SegmentChecker
+from planner.collision.segments import FEW_PAIRS, LEVEL_SUBSETS, MAX_LEVEL, SegmentChecker, _undominated
 from planner.motion.ramps import ramp
 
 
@@ -36,6 +36,21 @@ def test_every_index_is_scheduled_once_the_coarsest_levels_first():
             for j in range(top + 1):
                 tested = set(np.concatenate([idx for level, idx in levels if level >= j]).tolist())
                 assert set(range(0, n, 2**j)) | {0, n - 1} <= tested, f"n={n} top={top} level {j}"
+
+
+def test_the_leading_rows_are_those_no_other_row_bounds():
+    """A curve's clock reads only the rows no other row bounds in every column (a bounded row never moves farthest): on
+    random small-integer rows (many ties, many equal rows), the rows kept are, one each, exactly the distinct rows that
+    no other distinct row bounds everywhere (all pairs compared), and every row is bounded by a row kept."""
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        rows = rng.integers(0, 4, (int(rng.integers(0, 40)), int(rng.integers(1, 5)))).astype(float)
+        kept = _undominated(rows)
+        assert kept.shape[1:] == rows.shape[1:]
+        distinct = {tuple(r) for r in rows}
+        oracle = {r for r in distinct if not any(o != r and all(a >= b for a, b in zip(o, r)) for o in distinct)}
+        assert sorted(map(tuple, kept)) == sorted(oracle)
+        assert all(any(np.all(r <= k) for k in kept) for r in rows)
 
 
 def test_a_pair_gets_the_sparsest_spacing_that_keeps_its_bound(padded):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -25,6 +26,8 @@ from planner.collision.shapes import convex_geometry, is_mesh
 from planner.model.environment import Environment
 from planner.model.geometry import se3
 from planner.model.robot import Robot
+
+MEASURED = 64  # configurations whose measured distances a checker keeps (see CollisionChecker.measured)
 
 
 def simplified_robot_geometry(robot: Robot) -> pin.GeometryModel:
@@ -181,6 +184,7 @@ class CollisionChecker:
         self._own_margins: np.ndarray | None = None
         self._last: tuple | None = None  # (subset, margins, screen) of the last check, while its setting is active
         self._stand_ins: np.ndarray | None = None
+        self._measured: OrderedDict[bytes, dict[int, float]] = OrderedDict()  # see measured
         self.checks = 0
         self.pair_tests = 0  # pairs that reached the exact (narrow-phase) test: past the broad phase, active in the subset
 
@@ -358,6 +362,19 @@ class CollisionChecker:
             self._collect = pin.CollisionCallBackCollect(self.cm.geometry, self._gd)
         pin.computeCollisions(self.model, self.data, manager, self._collect, q)
         return [int(k) for k in self._collect.pair_indexes]
+
+    def measured(self, q: np.ndarray) -> dict[int, float]:
+        """The distances `distance` gave at q so far, by pair, for the caller to add to: one memo for every clearance meter
+        of this checker (a situation's meters differ only in the pairs they measure, and the span ends a smoothing fits
+        its ramps' checks to are measured for one set of moving joints after another); the last MEASURED configurations."""
+        key = q.tobytes()
+        if key in self._measured:
+            self._measured.move_to_end(key)
+        else:
+            self._measured[key] = {}
+            if len(self._measured) > MEASURED:
+                self._measured.popitem(last=False)
+        return self._measured[key]
 
     def distance(self, pair: int) -> float:
         """The distance of a pair where the last check placed the geometries, by coal's own function with a fresh solver:

@@ -215,9 +215,9 @@ class Clearances:
 
     def __call__(self, q: np.ndarray) -> dict[int, float]:
         """pair -> distance, for the subset's pairs nearer than `far` of their kind at q."""
-        near = {}
+        near, known = {}, self.checker.measured(q)
         for k in self.checker.overlapping(q, self.cm.subsets[self.subset], self.margins):
-            d = self.checker.distance(k)
+            d = known[k] if k in known else known.setdefault(k, self.checker.distance(k))
             if d < self.far[k]:
                 near[k] = d
         return near
