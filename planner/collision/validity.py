@@ -203,6 +203,8 @@ class Clearances:
     exact distances are computed; measuring every pair cost ten times more, testing every pair at the margin first twice."""
 
     def __init__(self, cm: CollisionModel, subset: str, far: dict[str, float], checker: CollisionChecker | None = None):
+        if checker is not None and checker.cm.geometry is not cm.geometry:
+            raise ValueError("a shared collision checker must be of the same geometry model (its distances are by pair)")
         self.cm, self.subset = cm, subset
         self.checker = checker or cm.checker()
         kind = np.full(len(cm.geometry.collisionPairs), "self", dtype=object)
