@@ -103,8 +103,9 @@ def test_bench_motion_on_two_roadmaps_from_an_empty_cache(tmp_path):
     assert all(r["pair_tests"] > 0 and r["duration"] > 0 for r in figures["per_roadmap"])
     for r in figures["runs"]["roadmap"] + figures["runs"]["rrt"]:  # --set reached the motion step (24,000 by default)
         assert sum(p["smoothing_checks"] for p in r["phases"]) < 3000
-        for p in r["phases"]:  # the RRTConnect's and the shortcuts' pair tests are parts of the transits'
-            assert 0 <= p["transit_pair_tests_rrt"] + p["transit_pair_tests_shortcut"] <= p["transit_pair_tests"], p
+        for p in r["phases"]:  # the RRTConnect's, the shortcuts' and the arm moved away's pair tests are parts of the transits'
+            parts = p["transit_pair_tests_rrt"] + p["transit_pair_tests_shortcut"] + p["transit_pair_tests_away"]
+            assert 0 <= parts <= p["transit_pair_tests"], p
     assert figures["rrt_pair_tests_by_part"]["RRTConnect"] > 0 and figures["pair_test_ratio_bound"] > 0
     assert "where the transits' pair tests go" in run.stdout
     assert "ours per roadmap" in run.stdout and "the roadmap of session seed 1" in run.stderr

@@ -337,7 +337,7 @@ def carried(example):
 
     scene, roadmap, _ = example
     robot = scene.robot
-    arm = robot.spec.arm_names[0]
+    arm = robot.spec.arm_names[1]
     cm = build_collision_model(robot, scene.environment)
     idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
     shape = coal_mesh(scene.object_mesh)
@@ -531,7 +531,7 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     scene, roadmap, _ = example
     robot = scene.robot
     planner = _phase_planner(scene, roadmap)
-    arm = robot.spec.arm_names[0]
+    arm = robot.spec.arm_names[1]
     hand, fingers = robot.hand_idx[arm], list(robot.finger_idx[arm].values())
     q = robot.q_rest.copy()
     target = robot.lower[hand] + 0.5 * (robot.upper[hand] - robot.lower[hand])
@@ -813,6 +813,16 @@ def test_transit_checks_and_pair_tests_count_every_check_of_the_transit(example,
     assert stats.pair_tests == sum(tested) >= len(calls) / 2, (stats.pair_tests, sum(tested))
     assert (stats.pairs_rrt, stats.pairs_shortcut) == (by_part["rrt"], by_part["shortcut"]), by_part
     assert by_part["shortcut"] > 0 and (by_part["rrt"] > 0) == baseline  # ours' Rest follows the graph, no reconnection
+    assert stats.pairs_away == 0
+    # an arm moved alone (both planners by RRTConnect): counted whole, apart, in neither RRTConnect's part nor the
+    # shortcuts'
+    arm, idx = robot.spec.arm_names[0], robot.arm_idx[robot.spec.arm_names[0]]
+    target = start.copy()
+    target[idx] += 0.2 * (scene.q_final[idx] - start[idx])  # a fifth of the way to its final values: free
+    before = (stats.pairs_rrt, stats.pairs_shortcut, stats.pair_tests, sum(tested))
+    planner.stage(Phase.REST).transit(start, target, Situation(None, scene.object_final), arm)
+    assert (stats.pairs_rrt, stats.pairs_shortcut) == before[:2]
+    assert stats.pairs_away == stats.pair_tests - before[2] == sum(tested) - before[3] > 0
 
 
 def test_the_carry_transit_can_use_the_roadmap_nodes(example):

@@ -69,7 +69,9 @@ class TransitStats:
     checks: int = 0  # collision checks of the transits (their ends, connecting, validating, reconnecting, shortcutting)
     pair_tests: int = 0  # of those checks' pairs, how many reached the exact test (a count of narrow-phase work)
     pairs_rrt: int = 0  # of those, the RRTConnect queries' (the baseline's) and reconnections' (ours')
-    pairs_shortcut: int = 0  # and the shortcuts'; the rest went to the ends, joining them to the graph and validating it
+    pairs_shortcut: int = 0  # and the shortcuts';
+    pairs_away: int = 0  # and an arm's moved alone, whole (no graph answers them: RRTConnect and shortcuts for either
+    # planner); the rest went to the ends, joining them to the graph and validating it
 
     @property
     def transit_seconds(self) -> float:

@@ -70,11 +70,14 @@ class TransitStage:
         finally:
             self.stats.checks += sum(c.checks for c in checkers) - before[0]
             self.stats.pair_tests += pairs() - before[1]
+            if arm is not None:  # counted apart, whole: the same work for either planner
+                self.stats.pairs_away += pairs() - before[1]
 
     def _transit(self, part: str, q_start: np.ndarray, q_goal: np.ndarray, situation: Situation, space: JointSpace,
                  full: Validity, near: Validity, arm: str | None, pairs: Callable[[], int]) -> Piece:
         """The transit's path, its ends checked first (see transit); what touches an end is checked `near` where it
-        fails `full` (see Graded). `pairs`: the pair tests the transit's checkers have made (counted per part)."""
+        fails `full` (see Graded). `pairs`: the pair tests the transit's checkers have made (counted per part; an arm's
+        alone, whole, by `transit`)."""
         phase, stats, tp = self.phase, self.stats, self.transit_params
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not near.state_valid(q):
@@ -91,7 +94,7 @@ class TransitStage:
                     path = rrt_transit(space, full, near, q_start, q_goal, dataclasses.replace(tp, rrt_motions=motions),
                                        self.rng, stats)
                 finally:
-                    stats.pairs_rrt += pairs() - before
+                    stats.pairs_rrt += (pairs() - before) if arm is None else 0
             else:  # a phase's queries share its RRT budget: once spent, they search the graph only
                 left = max(0, self.p.phase_reconnections - stats.rrt_calls)
                 if left == 0 < tp.max_reconnections:
@@ -112,7 +115,7 @@ class TransitStage:
         kept = None if detours is None else kept_detours(path, detours, greedy)
         path = shortcut(greedy, full, near, self.rng, tp.shortcut_attempts, gain, longest, kept)
         stats.seconds_shortcut += time.perf_counter() - t
-        stats.pairs_shortcut += pairs() - shortcut_before
+        stats.pairs_shortcut += (pairs() - shortcut_before) if arm is None else 0
         return Piece(phase, part, path, situation)
 
     def reach(self, q_start: np.ndarray, options: Iterator, option: tuple, situation: Situation) -> list[Piece]:
