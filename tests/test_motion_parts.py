@@ -337,7 +337,7 @@ def carried(example):
 
     scene, roadmap, _ = example
     robot = scene.robot
-    arm = robot.spec.arm_names[1]
+    arm = robot.spec.arm_names[0]
     cm = build_collision_model(robot, scene.environment)
     idx = np.concatenate([robot.torso_idx] + [robot.arm_idx[a] for a in robot.spec.arm_names])
     shape = coal_mesh(scene.object_mesh)
@@ -531,7 +531,7 @@ def test_finger_motions_move_joint_by_joint_from_the_tip_and_from_the_base(examp
     scene, roadmap, _ = example
     robot = scene.robot
     planner = _phase_planner(scene, roadmap)
-    arm = robot.spec.arm_names[1]
+    arm = robot.spec.arm_names[0]
     hand, fingers = robot.hand_idx[arm], list(robot.finger_idx[arm].values())
     q = robot.q_rest.copy()
     target = robot.lower[hand] + 0.5 * (robot.upper[hand] - robot.lower[hand])
