@@ -825,6 +825,34 @@ def test_transit_checks_and_pair_tests_count_every_check_of_the_transit(example,
     assert stats.pairs_away == stats.pair_tests - before[2] == sum(tested) - before[3] > 0
 
 
+def test_an_arm_moved_alone_has_its_own_budget(example, monkeypatch):
+    """The picking arm's move away is RRTConnect with `away_motions` motion checks, for either planner (found within a
+    few hundred or not at all: docs/benchmarks.md), not the reconnections' nor the baseline's query budget."""
+    import dataclasses
+
+    import planner.motion.transit as transit_module
+    from planner.collision.situation import Situation
+    from planner.core.session import Session
+    from planner.motion.phase import Phase
+    from planner.motion.result import PHASES
+
+    scene, roadmap, _ = example
+    robot = scene.robot
+    motion = Session.open(EXAMPLE).result("motion")
+    start = motion.q[np.flatnonzero(motion.phase == PHASES.index("Rest"))[0] - 1]
+    idx = robot.arm_idx[robot.spec.arm_names[0]]
+    target = start.copy()
+    target[idx] += 0.2 * (scene.q_final[idx] - start[idx])
+    budgets = []
+    real = transit_module._rrt
+    monkeypatch.setattr(transit_module, "_rrt", lambda *a: budgets.append(a[5]) or real(*a))
+    for baseline in (False, True):
+        planner = _phase_planner(scene, roadmap, baseline)
+        planner.p = dataclasses.replace(planner.p, away_motions=37)
+        planner.stage(Phase.REST).transit(start, target, Situation(None, scene.object_final), robot.spec.arm_names[0])
+    assert budgets == [37, 37]
+
+
 def test_the_carry_transit_can_use_the_roadmap_nodes(example):
     """While a hand holds the object, its closed fingers stay near its own wrist (nearer than the transit padding): the
     validity of the whole Carry transit pads those pairs as its two ends allow, so roadmap nodes near its start are

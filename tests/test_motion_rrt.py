@@ -204,7 +204,7 @@ def test_an_end_no_graph_edge_joins_is_reconnected_once_with_the_baselines_budge
 
     graph, space, walls, start, goal = _behind_a_wall(closed)
     params = TransitParams(connections=4, max_connections=8, max_searches=60, max_reconnections=2, reconnect_motions=1,
-                           rrt_motions=3000, rrt_step=0.1, shortcut_attempts=0, shortcut_min_gain=0.0,
+                           away_motions=1, rrt_motions=3000, rrt_step=0.1, shortcut_attempts=0, shortcut_min_gain=0.0,
                            graph_shortcut_length=np.inf, goal_nodes=16)
     stats = TransitStats()
     transit = LazyTransit(graph, space, walls, walls, walls, params, np.random.default_rng(0), stats)

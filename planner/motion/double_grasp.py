@@ -95,13 +95,14 @@ class DoubleGraspPlanner:
     def patiently(self, job: Job, result: list[Piece] | PieceFailed) -> list[Piece] | PieceFailed:
         """The job's result; for a patient planner, where its transit failed on the graph, the job run again here,
         RRTConnect given two more reconnections of the phase, each with the budget of a whole query of the baseline
-        planner (`rrt_motions`, not `reconnect_motions`): a transit out of a tight spot (a wrist under a lamp) can need
-        more than the quick search (strategies.py plans a sequence so when none moved without it)."""
+        planner (`rrt_motions`, not `reconnect_motions`; the arm's move away too, not `away_motions`): a transit out of a
+        tight spot (a wrist under a lamp) can need more than the quick search (strategies.py plans a sequence so when
+        none moved without it)."""
         if not self.patient or self.baseline or not isinstance(result, PieceFailed) or result.part != TRANSIT_PARTS[0]:
             return result
         phase, run = job
         stats = self.stats[phase]
-        patient = dataclasses.replace(self.p, reconnect_motions=self.p.rrt_motions,
+        patient = dataclasses.replace(self.p, reconnect_motions=self.p.rrt_motions, away_motions=self.p.rrt_motions,
                                       phase_reconnections=stats.rrt_calls + self.p.max_reconnections)
         try:
             return run(TransitStage(phase, self.validities, self.graph.copy(), self.rng, stats, patient, False))

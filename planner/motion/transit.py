@@ -39,6 +39,7 @@ class TransitParams:
     max_searches: int
     max_reconnections: int
     reconnect_motions: int
+    away_motions: int
     rrt_motions: int
     rrt_step: float
     shortcut_attempts: int

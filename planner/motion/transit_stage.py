@@ -87,8 +87,8 @@ class TransitStage:
         detours = None  # a graph path's segments RRTConnect made (see shortcut_vertices)
         spent = ""  # why a graph query may not reconnect (told with its failure)
         try:
-            if arm is not None or self.baseline:  # one arm: the reconnections' budget
-                motions = tp.reconnect_motions if arm is not None else tp.rrt_motions
+            if arm is not None or self.baseline:  # one arm: its own budget
+                motions = tp.away_motions if arm is not None else tp.rrt_motions
                 before = pairs()
                 try:
                     path = rrt_transit(space, full, near, q_start, q_goal, dataclasses.replace(tp, rrt_motions=motions),
