@@ -39,7 +39,7 @@ class MotionParams:
     reconnect_motions: int = bounded(1000, 1, 1000000, "motion checks", "a budget of one RRTConnect reconnection (counts: any "
                                      "machine; rrt_motions from an end no graph edge joins)")
     away_motions: int = bounded(400, 1, 1000000, "motion checks", "a budget of the picking arm's move away alone, per target "
-                                "(either planner; found within a few hundred, else not within 1,000: docs/benchmarks.md)")
+                                "(either planner)")
     patient_sequences: int = bounded(4, 0, 1000, "sequences", "when none moved: the first that failed at a transit, again with "
                                      "rrt_motions per reconnection")
     rrt_motions: int = bounded(20000, 1, 1000000, "motion checks", "a budget of one RRTConnect query of the baseline planner 'rrt'")
