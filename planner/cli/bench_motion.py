@@ -47,6 +47,7 @@ class MotionBench:
         from planner.motion import PHASE_SECONDS, PHASES
 
         runs, per = self.runs[planner], len(PHASE_SECONDS)
+        parts = [_pair_parts(r) for r in runs if r["phases"]]  # each run's transit pair tests by part
         phases = []
         for i, name in enumerate(PHASES):
             ok = [r for r in runs if r["phases_done"] > i]
@@ -71,8 +72,8 @@ class MotionBench:
                 "pair_tests": median([_pair_tests(r) for r in runs if r["phases"]]),
                 "duration": median([sum(p["duration"] for p in r["phases"]) for r in runs if r["success"]]),
                 "transit_checks": median([_transit_checks(r) for r in runs if r["phases"]]),
-                "pair_parts": {k: median([_pair_parts(r)[k] for r in runs if r["phases"]]) for k in PAIR_PARTS},
-                "unanswered": median([sum(_pair_parts(r)[k] for k in UNANSWERED) for r in runs if r["phases"]]),
+                "pair_parts": {k: median([p[k] for p in parts]) for k in PAIR_PARTS},
+                "unanswered": median([sum(p[k] for k in UNANSWERED) for p in parts]),
                 "untransit_seconds": median([r["seconds"] - _transit_seconds(r) for r in runs if r["phases"]]),
                 "phases": phases, "where": self.where(planner)}
 

@@ -219,9 +219,10 @@ class Clearances:
         """pair -> distance, for the subset's pairs nearer than `far` of their kind at q."""
         near, known = {}, self.checker.measured(q)
         for k in self.checker.overlapping(q, self.cm.subsets[self.subset], self.margins):
-            d = known[k] if k in known else known.setdefault(k, self.checker.distance(k))
-            if d < self.far[k]:
-                near[k] = d
+            if k not in known:
+                known[k] = self.checker.distance(k)
+            if known[k] < self.far[k]:
+                near[k] = known[k]
         return near
 
     def by_kind(self, near: dict[int, float]) -> dict[str, float]:
