@@ -30,12 +30,27 @@ class Command:
         return action
 
 
+class Parser(argparse.ArgumentParser):
+    """An argument parser (and its sub-commands' parsers) whose epilog may be a function, called only when the help is
+    printed: `regrasp plan`'s lists the pipeline's steps, which load the whole planner (seconds), and a command that
+    does not print that help need not load it."""
+
+    @property
+    def epilog(self) -> str | None:  # type: ignore[override]
+        text = self.__dict__.get("_epilog")
+        return text() if callable(text) else text
+
+    @epilog.setter
+    def epilog(self, text: str | Callable[[], str] | None) -> None:
+        self._epilog = text
+
+
 class CommandLine:
     """The `regrasp` parser and its sub-commands by full name (e.g. 'plan', 'bench collision'; '' is the top level)."""
 
     def __init__(self, description: str, epilog: str | None = None):
-        self.root = argparse.ArgumentParser(prog="regrasp", formatter_class=argparse.RawDescriptionHelpFormatter,
-                                            description=description, epilog=epilog)
+        self.root = Parser(prog="regrasp", formatter_class=argparse.RawDescriptionHelpFormatter, description=description,
+                           epilog=epilog)
         self.commands = {"": Command("", self.root)}
         self._subparsers = {"": self.root.add_subparsers(dest="command", metavar="COMMAND")}
 

@@ -126,7 +126,7 @@ def add_check(line: CommandLine) -> None:
 
 def add_plan(line: CommandLine) -> None:
     """`regrasp plan`."""
-    pl = line.command("plan", "run the pipeline headless into a session folder", _cmd_plan, epilog=_pipeline_epilog())
+    pl = line.command("plan", "run the pipeline headless into a session folder", _cmd_plan, epilog=_pipeline_epilog)
     add_task(pl)
     pl.add("--out", required=True, metavar="DIR", help="session folder to write")
     pl.add("--seed", type=seed_argument, default=0, help="session seed (each step's generator is derived from it)")

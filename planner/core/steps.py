@@ -13,14 +13,16 @@ import math
 import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from planner.core.bounds import Bound, field_bound, field_choices
 from planner.core.errors import InputError, RegraspError
 from planner.core.results import MAX_DEPTH, check_nesting, parse_json, read_only
-from planner.model.task import Scene
+
+if TYPE_CHECKING:  # the task model (trimesh) is not loaded by the commands that do not read a task
+    from planner.model.task import Scene
 
 Progress = Callable[[float, str], None]
 
