@@ -127,6 +127,7 @@ def test_bench_smoothing_from_an_empty_cache(tmp_path):
     assert "the smoothing adds" in run.stdout and "at most 20% asked" in run.stdout
 
 
+@pytest.mark.slow
 def test_bench_motion_refuses_to_set_what_it_compares():
     run = regrasp("bench", "motion", "--seeds", "1", "--set", "motion.planner=rrt")
     assert run.returncode == 2 and run.stderr.strip().splitlines() == [
@@ -250,6 +251,7 @@ def test_a_port_in_use_is_an_error_naming_it(capsys):
     assert err.count("\n") == 1 and out == "", (out, err)  # the error alone: no banner of a server on another port
 
 
+@pytest.mark.slow
 def test_a_port_in_use_prints_only_the_error_line(tmp_path):
     """As a user runs it: one line on stderr, nothing on stdout (viser's banner for the next free port never shows)."""
     with socket.socket() as taken:

@@ -69,6 +69,7 @@ def _closed_further(example, q0: np.ndarray, holder: str, tip: int) -> np.ndarra
     return q
 
 
+@pytest.mark.slow
 def test_a_finger_closed_further_into_the_object_is_found(example):
     """A touching finger of the holding hand closed on (its distal joint turned the way it closed until the fingertip
     has moved 5 mm): the one whose fingertip then moves most against the surface's outward normal (a fingertip on the

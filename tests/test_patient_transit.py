@@ -103,6 +103,7 @@ def _given_up_first(first: MotionParams):
     return attempt, made[0]
 
 
+@pytest.mark.slow
 def test_the_transits_of_a_sequence_given_up_are_counted():
     """The first double grasp is planned by a hurried planner, whose Rest transit fails: the sequence is given up and
     the next moves. The work of the one given up is not lost from the figures: the stage 'transits of the sequences
@@ -121,6 +122,7 @@ def test_the_transits_of_a_sequence_given_up_are_counted():
     assert (given["checks"], given["pair_tests"]) == (checks, pairs) and given["seconds"] > 0
 
 
+@pytest.mark.slow
 def test_a_sequence_given_up_before_its_transits_adds_no_stage():
     """The first double grasp's contact motions fail (obstacles kept 5 cm away: the hand cannot reach the object), so no
     transit of it ran: no stage counts its transits, and no stage of the motion counts 0 (a suite names the first stage

@@ -31,6 +31,7 @@ def padded(default_collision):
     return dataclasses.replace(cm, params=dataclasses.replace(cm.params, env_padding=0.03, self_padding=0.012))
 
 
+@pytest.mark.slow
 def test_a_curve_checked_for_the_rest_where_it_is_kept_tests_each_pair_there_as_its_whole_check_would(
         default_scene, padded, monkeypatch):
     """Random parabolic ramps from the rest pose, free by their whole check: screened, then checked for the rest over

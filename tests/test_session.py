@@ -90,6 +90,7 @@ def test_replay_calls_no_planner_step(example):
             object.__setattr__(step, "run", original)
 
 
+@pytest.mark.slow
 def test_existing_session_survives_without_force(example, default_scene):
     folder = example
     before = {p.name: p.read_bytes() for p in folder.iterdir()}

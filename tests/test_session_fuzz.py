@@ -243,6 +243,7 @@ def _mutate_npz(path: Path, rng: random.Random) -> str:
     return f"{path.name}:{name} {how}"
 
 
+@pytest.mark.slow
 def test_fuzzed_npz_entries_load_or_raise_input_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("REGRASP_CACHE", str(tmp_path / "cache"))
     rng = random.Random(SEED)

@@ -244,6 +244,7 @@ def test_check_says_what_the_reach_distance_is():
 
 # --- the grasp steps fail on an empty list -------------------------------------------------------
 
+@pytest.mark.slow
 def test_an_object_with_no_force_closed_grasp_fails_at_the_grasp_step(tmp_path):
     slab = trimesh.creation.box([0.45, 0.45, 0.32])  # wider than the hand opens every way
     slab.apply_translation([0, 0, 0.16])
@@ -302,6 +303,7 @@ def test_one_arm_reaches_both_no_handover_unless_asked(tmp_path, default_scene):
     assert "the task asks for a handover" in arms.choice
 
 
+@pytest.mark.slow
 def test_no_pair_of_arms_fails_with_the_forcing_hint(default_scene, default_collision):
     scene = _placed(default_scene, (0.45, -1.6))  # beyond every arm
     d = decide(scene, placement_reach(scene, default_collision.checker()))

@@ -91,6 +91,7 @@ def test_dropdown_values_outside_their_options_are_refused(bench: Workbench, fol
     assert len(lines) == 3 and all("ignored a change of" in line for line in lines), lines
 
 
+@pytest.mark.slow
 def test_disabled_controls_are_not_acted_on(bench: Workbench, caplog: pytest.LogCaptureFixture) -> None:
     panel = bench.session_panel
     bench._load(DEFAULT_TASK, None)

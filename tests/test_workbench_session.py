@@ -181,6 +181,7 @@ def test_rerun_from_here_makes_a_new_session_and_keeps_the_original(workbench: W
     assert _files(original) == before, "re-running changed the loaded session's files"
 
 
+@pytest.mark.slow
 def test_run_next_step_from_a_task(workbench: Workbench, monkeypatch: pytest.MonkeyPatch) -> None:
     """With no session, "run the next step" starts a scratch session, shows progress and draws the result."""
     panel = workbench.session_panel
