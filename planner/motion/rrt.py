@@ -53,7 +53,7 @@ class _CallableMotionValidator(ob.MotionValidator):
         self._dim = dim
         self._state_valid = state_valid
         self._motion_valid = motion_valid
-        self.motions = 0  # motions checked so far (a budget in these is the same on any machine)
+        self.motions = 0  # motions checked so far (a budget in these is the same however fast the machine)
 
     def checkMotion(self, s1: ob.State, s2: ob.State) -> bool:
         """Whether RRTConnect may join s1 to s2: s2 is a valid state and the segment is free."""
@@ -121,7 +121,7 @@ def rrt_connect(lower: np.ndarray, upper: np.ndarray,
     ends before `time_limit`: OMPL's seed generator is reseeded before anything random is made
     (process-wide, so concurrent OMPL use in other threads would break this). With `max_motions` the
     solve stops after that many motion checks instead of after `time_limit`: the same inputs and seed
-    then give the same result on any machine, however busy.
+    then give the same result however fast or busy the machine.
     """
     lower, upper, start, goal, seed = _checked_inputs(lower, upper, start, goal, seed, time_limit, range_)
     d = lower.size

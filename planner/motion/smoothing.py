@@ -13,7 +13,8 @@ replayed, the new ones checked whole). Inside one piece it is checked with that 
 transit's paddings fitted to its ends, a contact motion's tight paddings); across pieces (a lift into a transit, a
 transit into an approach) with the transit profile in the object's situation without its exceptions (no fingertip nor
 support may touch), fitted to the ramp's ends: a hand near the object keeps the straight contact motion. Budgets are
-attempts and collision checks per run, never seconds: one seed, one trajectory on any machine.
+attempts and collision checks per run, never seconds: one seed, one trajectory however fast or busy the machine
+(across processor kinds, to rounding: docs/design.md, Determinism).
 """
 from __future__ import annotations
 
