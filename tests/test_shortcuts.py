@@ -99,12 +99,8 @@ def test_vertex_shortcuts_jump_to_the_farthest_reachable_vertex_and_check_each_k
         u = ((p - qa)[0] * d[1] - (p - qa)[1] * d[0]) / den
         return 0.0 <= t <= 1.0 and 0.0 <= u <= 1.0
 
-    class Rule:
-        def __init__(self):
-            self.calls = []
-
-        def state_valid(self, q):
-            return True
+    class Rule(Counting):
+        """Counting's, the motions crossing the wall invalid, each recorded as a pair of tuples."""
 
         def motion_valid(self, qa, qb, ends=True):
             self.calls.append((tuple(qa), tuple(qb)))
