@@ -213,6 +213,16 @@ def test_plan_help_lists_the_steps():
         assert f"  {step.name} " in text
 
 
+def test_a_command_that_reads_no_task_loads_neither_the_pipeline_nor_the_workbench():
+    """`regrasp --version` and the top-level help need only the parser (`plan --help` lists the steps when printed:
+    test_plan_help_lists_the_steps): in a fresh interpreter, neither imports viser, trimesh nor the pipeline."""
+    probe = ("import sys\nfrom workbench.cli import main\nfor args in (['--version'], ['--help']):\n    try:\n"
+             "        main(args)\n    except SystemExit:\n        pass\n"
+             "print(sorted(m for m in ('viser', 'trimesh', 'planner.pipeline') if m in sys.modules))")
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert run.stdout.splitlines()[-1] == "[]", run.stdout[-300:]
+
+
 def test_params_lists_every_parameter_with_type_and_default():
     run = regrasp("params")
     assert run.returncode == 0, run.stderr
