@@ -154,6 +154,7 @@ def test_environment_padding(default_scene):
     assert results == {0.005: True, 0.03: False}
 
 
+@pytest.mark.slow
 def test_pairs_the_robot_spec_allows_are_never_checked():
     """Baxter's spec allows each upper-arm cover to touch its forearm (the cover's cylinder reaches past the elbow): no
     such pair is a candidate, and the count says how many were left out."""

@@ -134,6 +134,7 @@ def test_generation_is_deterministic_and_every_task_passes_check(local_run, suit
         assert report.ok and report.handover, report.render()
 
 
+@pytest.mark.slow
 def test_a_region_that_yields_no_valid_task_is_named(tmp_path):
     path = tmp_path / "vase.toml"  # the final region is inside the vase: every placement there penetrates it
     path.write_text(SUITE.replace('name = "behind_lamp"\nx = [0.48, 0.56]\ny = [0.80, 0.87]',

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from sandbox import cli_env
 
 from planner.core.paths import PROJECT_ROOT
@@ -29,6 +30,7 @@ def _env(tmp: Path) -> dict[str, str]:
     return {k: v for k, v in cli_env(TMPDIR=str(tmp)).items() if k != "REGRASP_CACHE"}
 
 
+@pytest.mark.slow
 def test_a_scratch_session_folder_is_removed_at_exit_not_at_a_childs(tmp_path: Path) -> None:
     run = subprocess.run([sys.executable, "-c", MAKE_AND_FORK], capture_output=True, text=True, timeout=120, env=_env(tmp_path),
                          cwd=PROJECT_ROOT, check=False)

@@ -129,6 +129,7 @@ def _unchanged(wb: Workbench, page: Page, title: str, finished: list[str]) -> No
     assert wb.session_panel.job is None and wb.session is not None and wb.session.finished() == finished
 
 
+@pytest.mark.browser
 def test_a_replayed_description_is_shown_as_text(replayed: Workbench, page: Page, browser: Browser) -> None:
     clean = browser.new_page()
     try:
@@ -140,6 +141,7 @@ def test_a_replayed_description_is_shown_as_text(replayed: Workbench, page: Page
     page.get_by_text("parent.document.title", exact=False).first.wait_for(timeout=20_000)  # the description, as text
 
 
+@pytest.mark.browser
 def test_a_rejected_session_quoting_a_script_is_shown_as_text(replayed: Workbench, page: Page) -> None:
     title, session = page.title(), replayed.session
     assert not replayed.session_panel.load(replayed.session_panel.sessions_dir / "rejected")  # what "Load" does
