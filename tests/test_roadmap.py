@@ -297,7 +297,7 @@ def test_coarse_first_never_passes_a_segment_that_comes_nearer_than_the_clearanc
             calls.append(s)
             return d(s) < (k if coarse else 1.0)
 
-        nearest = float(np.min(depth + 2.0 * (n - 1) * np.abs(np.linspace(0.0, 1.0, 20 * n) - s0)))  # d over the grid, at once
+        nearest = float(np.min(d(np.linspace(0.0, 1.0, 20 * n))))  # d over the grid, at once
         passed = coarse_first(n, k, hits) is None
         if passed:
             assert nearest >= 0.0, f"n={n} k={k}: passed with the pair {-nearest:.3f} deep"
@@ -333,7 +333,7 @@ def test_two_level_never_passes_a_segment_that_comes_nearer_than_the_clearance()
 
         if not ends and min(d(0.0), d(1.0)) < 1.0:
             continue  # the ends must be valid at the fine padding to be skipped
-        nearest = float(np.min(depth + 2.0 * (m - 1) * np.abs(np.linspace(0.0, 1.0, 20 * m) - s0)))  # d over the grid, at once
+        nearest = float(np.min(d(np.linspace(0.0, 1.0, 20 * m))))  # d over the grid, at once
         passed = two_level(n, m, hits, ends) is None
         if passed:
             assert nearest >= 0.0, f"n={n} m={m}: passed with the pair {-nearest:.3f} deep"
@@ -373,8 +373,7 @@ def test_two_level_tests_only_the_finer_pairs_between_coarse_configurations():
             return d_a(s) < 1.0
 
         grid = np.linspace(0.0, 1.0, 20 * m)  # d_a and d_b over it, at once
-        near_a = float(np.min(depth_a + 2.0 * (m - 1) * np.abs(grid - s_a)))
-        near_b = float(np.min(depth_b + 2.0 * pad_b * (n - 1) * np.abs(grid - s_b)))
+        near_a, near_b = float(np.min(d_a(grid))), float(np.min(d_b(grid)))
         if two_level(n, m, hits, True, between) is None:
             assert near_a >= 0.0 and near_b >= 0.0, f"n={n} m={m}: passed {near_a:.3f} / {near_b:.3f} from the clearance"
             passed_with_b_near += near_b < pad_b
