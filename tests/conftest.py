@@ -12,6 +12,20 @@ if "REGRASP_CACHE" not in os.environ:  # a cache given in the environment is the
     os.environ["REGRASP_CACHE"] = str(temporary_folder("regrasp-test-cache-"))
 
 
+@pytest.fixture(scope="session", autouse=True)
+def one_process_per_test_worker():
+    """Under pytest-xdist each core already runs a test worker: a step's pools run inline (cpu_budget 1) instead of
+    forking processes that take the other worker's core. The tests of the forked paths set their own budget
+    (test_motion_workers.py, test_session.py), and the command-line tests' subprocesses keep every core."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        yield
+        return
+    from planner.core.forked import cpu_budget
+
+    with cpu_budget(1):
+        yield
+
+
 @pytest.fixture(scope="session")
 def default_scene():
     from planner.model.task import load_task

@@ -19,6 +19,15 @@ from planner.core.session import Session
 
 pytestmark = pytest.mark.slow  # each test starts and signals whole planner processes
 
+
+@pytest.fixture(autouse=True)
+def every_core():
+    """The in-process pools here fork two workers, whatever budget the test worker runs under (conftest.py)."""
+    from planner.core.forked import cpu_budget
+
+    with cpu_budget(2):
+        yield
+
 WORKERS_START_WITHIN = 900.0  # s: a cold cache builds the pair set, the finger workspaces and the object model first
 WORKERS_GONE_WITHIN = 30.0  # s: a timeout, not a measurement; the kernel kills them at once
 
