@@ -1,7 +1,8 @@
-"""Shared fixtures: a private cache folder (deleted when the tests end), the default scene and its collision model
-(built once)."""
+"""Shared fixtures: a private cache folder (deleted when the tests end), a step's pools inline in a pytest-xdist worker,
+the default scene and its collision model (built once)."""
 from __future__ import annotations
 
+import contextlib
 import os
 
 import pytest
@@ -16,13 +17,11 @@ if "REGRASP_CACHE" not in os.environ:  # a cache given in the environment is the
 def one_process_per_test_worker():
     """Under pytest-xdist each core already runs a test worker: a step's pools run inline (cpu_budget 1) instead of
     forking processes that take the other worker's core. The tests of the forked paths set their own budget
-    (test_motion_workers.py, test_session.py), and the command-line tests' subprocesses keep every core."""
-    if not os.environ.get("PYTEST_XDIST_WORKER"):
-        yield
-        return
+    (test_motion_workers.py, test_nested_pools.py, test_orphans.py, test_session.py), and the command-line tests'
+    subprocesses keep every core."""
     from planner.core.forked import cpu_budget
 
-    with cpu_budget(1):
+    with cpu_budget(1) if os.environ.get("PYTEST_XDIST_WORKER") else contextlib.nullcontext():
         yield
 
 

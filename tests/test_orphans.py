@@ -19,6 +19,9 @@ from planner.core.session import Session
 
 pytestmark = pytest.mark.slow  # each test starts and signals whole planner processes
 
+WORKERS_START_WITHIN = 900.0  # s: a cold cache builds the pair set, the finger workspaces and the object model first
+WORKERS_GONE_WITHIN = 30.0  # s: a timeout, not a measurement; the kernel kills them at once
+
 
 @pytest.fixture(autouse=True)
 def every_core():
@@ -28,8 +31,6 @@ def every_core():
     with cpu_budget(2):
         yield
 
-WORKERS_START_WITHIN = 900.0  # s: a cold cache builds the pair set, the finger workspaces and the object model first
-WORKERS_GONE_WITHIN = 30.0  # s: a timeout, not a measurement; the kernel kills them at once
 
 WORKBENCH_RUN = """
 import faulthandler

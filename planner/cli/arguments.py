@@ -37,8 +37,7 @@ class Parser(argparse.ArgumentParser):
 
     @property
     def epilog(self) -> str | None:  # type: ignore[override]
-        text = self.__dict__.get("_epilog")
-        return text() if callable(text) else text
+        return self._epilog() if callable(self._epilog) else self._epilog
 
     @epilog.setter
     def epilog(self, text: str | Callable[[], str] | None) -> None:
