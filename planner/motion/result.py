@@ -48,7 +48,7 @@ class MotionParams:
     shortcut_min_gain: float = bounded(0.1, 0.0, 10.0, "rad", "a straight shortcut shortening the path by less is not checked")
     graph_shortcut_length: float = bounded(3.0, 0.0, 100.0, "rad",
                                            "roadmap: a graph path's shortcuts longer than this are not tried (but over an RRT detour)")
-    smooth_attempts_per_s: float = bounded(40.0, 0.0, 100000.0, "shortcuts/s", "random parabolic shortcuts drawn for a run, per "
+    smooth_attempts_per_s: float = bounded(10.0, 0.0, 100000.0, "shortcuts/s", "random parabolic shortcuts drawn for a run, per "
                                            "second it could save (its time rest to rest less its ends' least)")
     smooth_checks_per_s: float = bounded(1000.0, 0.0, 10000000.0, "checks/s", "collision checks a run's smoothing may make, per "
                                          "second it could save")
