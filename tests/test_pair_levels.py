@@ -53,6 +53,22 @@ def test_the_leading_rows_are_those_no_other_row_bounds():
         assert all(any(np.all(r <= k) for k in kept) for r in rows)
 
 
+def test_each_set_of_moving_joints_leads_with_rows_that_bound_all_the_others(padded):
+    """A curve's clock reads, for the joints it moves, rows of the subset that bound every row of it there (so the
+    largest product with speeds >= 0 is the same as over all rows): for the first set of joints a checker sees (picked
+    among all rows) and for the later ones (picked among the rows no other bounds over all joints), in any order."""
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        seg = SegmentChecker(padded, 0.01, 0.005)
+        rows = seg.weights("all")
+        for _ in range(4):
+            moving = np.sort(rng.choice(rows.shape[1], int(rng.integers(1, rows.shape[1])), replace=False))
+            lead = seg._leading("all", moving)
+            every = {tuple(r) for r in rows[:, moving]}
+            assert {tuple(r) for r in lead} <= every, "a leading row that is no row of the subset"
+            assert all(np.any(np.all(r <= lead, axis=1)) for r in rows[:, moving]), "a row no leading row bounds"
+
+
 def test_a_pair_gets_the_sparsest_spacing_that_keeps_its_bound(padded):
     """A pair whose displacement spans `need` of the n - 1 intervals at most is checked every 2^j-th configuration with
     2^j need <= n - 1, the largest such power (up to MAX_LEVEL and n - 1): between two of its checks it moves no more

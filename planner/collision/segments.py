@@ -253,13 +253,19 @@ class SegmentChecker:
     def _leading(self, subset: str, moving: np.ndarray) -> np.ndarray:
         """The subset's displacement weights over the moving joints without the rows another row bounds everywhere
         (speeds are >= 0: a bounded row never gives the largest displacement): a handful of a thousand, once per set of
-        joints, picked among the rows no other bounds over all joints (bounded there, bounded over any of them)."""
+        joints. Most checkers see one set (a ramp's checker is made for the joints its pieces move): the first is picked
+        among all rows; from a second on, among the rows no other bounds over all joints (bounded there, bounded over
+        any of them), found then."""
         key = (subset, moving.tobytes())
         if key not in self._leading_rows:
             every = (subset, b"")
-            if every not in self._leading_rows:
-                self._leading_rows[every] = _undominated(self.weights(subset))
-            self._leading_rows[key] = _undominated(np.unique(self._leading_rows[every][:, moving], axis=0))
+            if every in self._leading_rows or any(k[0] == subset for k in self._leading_rows):
+                if every not in self._leading_rows:
+                    self._leading_rows[every] = _undominated(self.weights(subset))
+                rows = self._leading_rows[every]
+            else:
+                rows = self.weights(subset)
+            self._leading_rows[key] = _undominated(rows[:, moving])
         return self._leading_rows[key]
 
     def _grid(self, n: int) -> int:
