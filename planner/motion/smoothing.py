@@ -227,7 +227,9 @@ class _Run:
         self.eager = eager  # new shortcuts checked whole (a screen of this run has let a colliding one through)
         self.moves = np.array([np.ptp(p.path, axis=0) > 0 for p in pieces])  # the joints each piece moves
         robot = smoother.validities.robot
-        self.fingers = np.isin(np.arange(robot.nq), np.concatenate([robot.hand_idx[a] for a in robot.spec.arm_names]))
+        fingers = np.isin(np.arange(robot.nq), np.concatenate([robot.hand_idx[a] for a in robot.spec.arm_names]))
+        contact = np.array([p.part in LEAVING + REACHING for p in pieces])
+        self.still = fingers & ~self.moves & contact[:, None]  # per piece, the fingers a contact motion keeps still
         self.checks_of = checks_of  # the validities of ramps by the pieces they span and the joints they move
         self.strict = next((p.situation for p in pieces if not p.situation.touching and not p.situation.support),
                            Situation(pieces[0].situation.holder, pieces[0].situation.pose))
@@ -247,8 +249,7 @@ class _Run:
         approach), over the pairs changed by the joints their pieces move and the ramp does. None when the ramp would
         move fingers in a contact motion that keeps them still (a hand is shaped before it approaches)."""
         i, j = (min(int(np.searchsorted(self.ends, t, side="left")), len(self.pieces) - 1) for t in (t1, t2))
-        if any(p.part in LEAVING + REACHING and np.any(ramp_moves & self.fingers & ~m)
-               for p, m in zip(self.pieces[i: j + 1], self.moves[i: j + 1])):
+        if np.any(self.still[i: j + 1] & ramp_moves):
             return None
         spanned = self.moves[i: j + 1].any(axis=0)
         moving = np.flatnonzero(spanned | ramp_moves)
