@@ -64,8 +64,7 @@ def test_each_set_of_moving_joints_leads_with_rows_that_bound_all_the_others(pad
         for _ in range(4):
             moving = np.sort(rng.choice(rows.shape[1], int(rng.integers(1, rows.shape[1])), replace=False))
             lead = seg._leading("all", moving)
-            every = {tuple(r) for r in rows[:, moving]}
-            assert {tuple(r) for r in lead} <= every, "a leading row that is no row of the subset"
+            assert {tuple(r) for r in lead} <= {tuple(r) for r in rows[:, moving]}, "a leading row that is no row of the subset"
             assert all(np.any(np.all(r <= lead, axis=1)) for r in rows[:, moving]), "a row no leading row bounds"
 
 

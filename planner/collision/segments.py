@@ -258,13 +258,12 @@ class SegmentChecker:
         any of them), found then."""
         key = (subset, moving.tobytes())
         if key not in self._leading_rows:
-            every = (subset, b"")
-            if every in self._leading_rows or any(k[0] == subset for k in self._leading_rows):
+            rows = self.weights(subset)
+            if any(k[0] == subset for k in self._leading_rows):  # a second set of joints (or more)
+                every = (subset, b"")
                 if every not in self._leading_rows:
-                    self._leading_rows[every] = _undominated(self.weights(subset))
+                    self._leading_rows[every] = _undominated(rows)
                 rows = self._leading_rows[every]
-            else:
-                rows = self.weights(subset)
             self._leading_rows[key] = _undominated(rows[:, moving])
         return self._leading_rows[key]
 
