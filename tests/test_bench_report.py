@@ -182,3 +182,20 @@ def test_the_smoothings_planning_growth_is_the_median_of_per_seed_ratios_over_th
     assert list(passes) == ["vertices", "corners", "random"]
     assert passes["vertices"] == {"attempts": 210, "kept": 9, "saved": 32.0} and passes["random"]["attempts"] == 2100
     assert passes["corners"]["saved"] == 16.0 and "random         2100     3    16.00                   131" in text
+
+
+def test_phases_split_by_whether_the_graph_joined_their_ends_sum_pair_tests_less_the_arm_moved_away():
+    # seed 0: ours' Carry has an end no graph edge joins; seed 1: ours planned another double grasp than RRTConnect's,
+    # so its phases are compared with none
+    ours, rrt = _timed(0, 1.0, 0.5, 10), _timed(0, 2.0, 0.5, 40)
+    ours["phases"][1].update(ends_alone=1, transit_pair_tests=70)
+    ours["phases"][2].update(transit_pair_tests=15, transit_pair_tests_away=5)
+    rrt["phases"][2].update(transit_pair_tests=45, transit_pair_tests_away=5)
+    other = {**_timed(1, 1.0, 0.5, 10), "double_grasp": 3}
+    d = MotionBench([0, 1], {"roadmap": [ours, other], "rrt": [rrt, _timed(1, 2.0, 0.5, 40)]}).to_dict()
+    assert (d["phases_joined"], d["ours_pair_tests_joined"], d["rrt_pair_tests_joined"]) == (3, 10 + 10 + 10, 40 + 40 + 40)
+    assert (d["phases_alone"], d["ours_pair_tests_alone"], d["rrt_pair_tests_alone"]) == (1, 70, 40)
+    assert d["pair_test_ratio_joined"] == 4.0 and abs(d["pair_test_ratio_alone"] - 40 / 70) < 1e-12
+    text = MotionBench([0, 1], {"roadmap": [ours, other], "rrt": [rrt, _timed(1, 2.0, 0.5, 40)]}).render()
+    assert "phases with a query end no graph edge joins: 1, their transit pair tests less the arm moved away, ours / " \
+           "RRTConnect 70 / 40 (RRTConnect / ours 0.57" in text

@@ -214,10 +214,25 @@ def test_an_end_no_graph_edge_joins_is_reconnected_once_with_the_baselines_budge
         assert stats.rrt_calls == 1
         return
     path = transit.query(start, goal)
-    assert stats.rrt_calls == 1
+    assert stats.rrt_calls == 1 and stats.ends_alone == 2  # the goal is not joined either: the start's RRTConnect reaches it
     assert np.array_equal(path[0], start) and np.array_equal(path[-1], goal)
     for a, b in zip(path[:-1], path[1:]):  # free at ten times the checker's resolution
         assert np.all(clearance(segment_points(a, b, STEP / 10), walls_of(closed)) > 0.0)
+
+
+def test_ends_the_graph_joins_are_not_counted_alone():
+    """The same nodes, the start in front of the wall and a post before the goal: the straight motion hits the post,
+    an edge joins each end to a node, and the graph goes around it: no RRTConnect call, no end alone."""
+    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+
+    graph, space, _, _, goal = _behind_a_wall(False)
+    walls = _Walls(walls_of(False) + [(np.array([0.80, 0.45]), np.array([0.85, 0.55]))])
+    params = TransitParams(connections=4, max_connections=8, max_searches=60, max_reconnections=2, reconnect_motions=1,
+                           away_motions=1, rrt_motions=3000, rrt_step=0.1, shortcut_attempts=0, shortcut_min_gain=0.0,
+                           graph_shortcut_length=np.inf, goal_nodes=16)
+    stats = TransitStats()
+    path = LazyTransit(graph, space, walls, walls, walls, params, np.random.default_rng(0), stats).query(np.array([0.45, 0.5]), goal)
+    assert stats.ends_alone == 0 and stats.rrt_calls == 0 and len(path) > 2
 
 
 def walls_of(closed: bool):

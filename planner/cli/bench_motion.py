@@ -36,7 +36,7 @@ class MotionBench:
                 "ours_pair_tests_by_part": ours["pair_parts"], "rrt_pair_tests_by_part": rrt["pair_parts"],
                 "pair_test_ratio_bound": rrt["pair_tests"] / ours["unanswered"] if ours["unanswered"] > 0 else None,
                 "speedup_bound": (rrt["seconds"] / ours["untransit_seconds"] if ours["untransit_seconds"] > 0 else None),
-                **self.totals(),
+                **self.totals(), **self.by_joining(),
                 "ours_success": ours["success"], "rrt_success": rrt["success"],
                 "ours_duration_median": ours["duration"], "rrt_duration_median": rrt["duration"],
                 "full_check_us_before": self.check_us[0], "full_check_us_after": self.check_us[1],
@@ -60,6 +60,7 @@ class MotionBench:
                            "seconds_reconnecting": median([r["phase_seconds"][per * i + 2] for r in runs if r["phases"]]),
                            "seconds": median([sum(r["phase_seconds"][per * i: per * (i + 1)]) for r in runs if r["phases"]]),
                            "edges_invalidated": median([r["edges_invalidated"] for r in rows]),
+                           "ends_alone": median([r.get("ends_alone", 0) for r in rows]),
                            "rrt_calls": median([r["rrt_calls"] for r in rows]),
                            "transit_checks": median([r["transit_checks"] for r in rows]),
                            "pair_tests": median([r.get("transit_pair_tests", 0) for r in rows]),
@@ -93,6 +94,21 @@ class MotionBench:
         ours_s, rrt_s = sum(a["seconds"] for a, _ in pairs), sum(b["seconds"] for _, b in pairs)
         return {"ours_pair_tests_total": ours, "rrt_pair_tests_total": rrt, "pair_test_ratio_total": _ratio(rrt, ours),
                 "ours_seconds_total": ours_s, "rrt_seconds_total": rrt_s, "speedup_total": _ratio(rrt_s, ours_s)}
+
+    def by_joining(self) -> dict:
+        """Where the roadmap acts: the phases of ours' runs split by whether the graph joined every query end (none
+        alone), each beside RRTConnect's same phase on the same seed (the same double grasp only), summed: their transit
+        pair tests less the arm moved away (the same work for either), and how many phases; an end no edge joins makes
+        its query RRTConnect's from there, so only the joined phases show what the roadmap saves."""
+        out = {}
+        for key, alone in (("joined", False), ("alone", True)):
+            rows = [(p, q) for a, b in self._pairs() if a["double_grasp"] == b["double_grasp"]
+                    for p, q in zip(a["phases"], b["phases"]) if (p.get("ends_alone", 0) > 0) == alone]
+            ours, rrt = (sum(r.get("transit_pair_tests", 0) - r.get("transit_pair_tests_away", 0) for r in side)
+                         for side in zip(*rows)) if rows else (0, 0)
+            out.update({f"phases_{key}": len(rows), f"ours_pair_tests_{key}": ours, f"rrt_pair_tests_{key}": rrt,
+                        f"pair_test_ratio_{key}": _ratio(rrt, ours)})
+        return out
 
     def _pairs(self) -> list[tuple[dict, dict]]:
         """(ours, RRTConnect's) of each run of ours, with RRTConnect's run of the same seed."""
@@ -145,11 +161,11 @@ class MotionBench:
             on = f" x {self.roadmaps} roadmaps" if planner == "roadmap" and self.roadmaps > 1 else ""
             out += [f"{title}: median {s['seconds']:.2f} s over {len(self.seeds)} seeds{on}{fastest}, success {s['success']:.0%}, "
                     f"{s['transit_checks']:.0f} transit collision checks, motion {s['duration']:.2f} s long",
-                    f"{'phase':<7}{'nodes plan':>11}{'s plan':>8}{'nodes val':>10}{'s val':>8}{'invalid':>8}{'RRT':>5}"
+                    f"{'phase':<7}{'nodes plan':>11}{'s plan':>8}{'nodes val':>10}{'s val':>8}{'invalid':>8}{'alone':>6}{'RRT':>5}"
                     f"{'checks':>8}{'pairs':>9}{'smooth':>8}{'s total':>9}{'success':>8}{'length':>8}{'straight':>9}{'duration':>9}"]
             for r in s["phases"]:
                 out.append(f"{r['phase']:<7}{r['nodes_planning']:>11.0f}{r['seconds_planning']:>8.2f}{r['nodes_validating']:>10.0f}"
-                           f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['rrt_calls']:>5.0f}{r['transit_checks']:>8.0f}"
+                           f"{r['seconds_validating']:>8.2f}{r['edges_invalidated']:>8.0f}{r['ends_alone']:>6.0f}{r['rrt_calls']:>5.0f}{r['transit_checks']:>8.0f}"
                            f"{r['pair_tests']:>9.0f}{r['smoothing_checks']:>8.0f}{r['seconds']:>9.2f}{r['success']:>8.0%}{r['path_length']:>8.2f}"
                            f"{r['straight_distance']:>9.2f}{r['duration']:>9.2f}")
             out.append("where the time goes (median s): " + ", ".join(f"{k} {v:.2f}" for k, v in s["where"].items())
@@ -188,6 +204,10 @@ class MotionBench:
                    f"{d['ours_pair_tests_total']:,} / {d['rrt_pair_tests_total']:,} (RRTConnect / ours {d['pair_test_ratio_total']:.2f}), "
                    f"step {d['ours_seconds_total']:.1f} / {d['rrt_seconds_total']:.1f} s ({d['speedup_total']:.2f}): a median hides "
                    "the seeds where one planner spends most")
+        for key, what in (("joined", "whose every query end the graph joined"), ("alone", "with a query end no graph edge joins")):
+            out.append(f"phases {what}: {d[f'phases_{key}']}, their transit pair tests less the arm moved away, ours / "
+                       f"RRTConnect {d[f'ours_pair_tests_{key}']:,} / {d[f'rrt_pair_tests_{key}']:,} (RRTConnect / ours "
+                       f"{d[f'pair_test_ratio_{key}']:.2f}; summed, the same double grasp on both sides)")
         if d["check_ratio"]:
             out.append(f"transit collision checks (RRTConnect median / ours): {d['check_ratio']:.2f} (a count: the same on any machine)")
         out.append(f"a full collision check (regrasp bench collision) took {self.check_us[0]:.0f} µs before the runs and "

@@ -170,7 +170,7 @@ def _phase_row(i: int, st, q: np.ndarray, phase: np.ndarray, dt: float, pieces: 
             "edges_invalidated": st.edges_invalidated, "rrt_calls": st.rrt_calls, "searches": st.searches,
             "transit_checks": st.checks, "transit_pair_tests": st.pair_tests, "transit_pair_tests_rrt": st.pairs_rrt,
             "transit_pair_tests_shortcut": st.pairs_shortcut, "transit_pair_tests_away": st.pairs_away,
-            "smoothing_checks": sum(r.checks for r in smoothed),
+            "ends_alone": st.ends_alone, "smoothing_checks": sum(r.checks for r in smoothed),
             "smoothing_attempts": [int(sum(r.attempts[k] for r in smoothed)) for k in range(len(PASSES))],
             "smoothing_kept": [int(sum(r.kept[k] for r in smoothed)) for k in range(len(PASSES))],
             "smoothing_saved": [round(float(sum(r.saved[k] for r in smoothed)), 4) for k in range(len(PASSES))],

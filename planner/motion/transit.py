@@ -73,6 +73,7 @@ class TransitStats:
     pairs_shortcut: int = 0  # and the shortcuts';
     pairs_away: int = 0  # and an arm's moved alone, whole (no graph answers them: RRTConnect and shortcuts for either
     # planner); the rest went to the ends, joining them to the graph and validating it
+    ends_alone: int = 0  # query ends no edge joined to the graph (their query is RRTConnect's from there: see query)
 
     @property
     def transit_seconds(self) -> float:
@@ -211,6 +212,7 @@ class LazyTransit:
             self.alone = set() if self._connect(goal) else {goal}
         else:
             self.alone = {start, goal}
+        stats.ends_alone += len(self.alone)
         stats.nodes_planning += 2
         stats.seconds_planning += time.perf_counter() - t0
         last: tuple[list[int], tuple[int, int]] | None = None

@@ -44,8 +44,8 @@ def route_segments(result: Motion) -> tuple[np.ndarray, np.ndarray]:
 def table_one(result: Motion, seconds: list[float] | None) -> str:
     """Table I of the session as markdown, one column per phase: nodes added planning / validating, the seconds of
     planning, validating, reconnecting, shortcutting and contact motions (from the session record; '–' when absent),
-    edges invalidated, RRT calls, transit and smoothing collision checks, path length, straight distance between the
-    phase's ends and duration."""
+    edges invalidated, query ends no graph edge joined, RRT calls, transit and smoothing collision checks, path length,
+    straight distance between the phase's ends and duration."""
     phases, per = result.phases, len(PHASE_SECONDS)
     secs = seconds if seconds and len(seconds) >= per * len(phases) else None
     rows = [("nodes planning", [plain(p["nodes_planning"]) for p in phases]),
@@ -53,6 +53,7 @@ def table_one(result: Motion, seconds: list[float] | None) -> str:
     rows += [(f"s {stage}", [f"{secs[per * k + j]:.3f}" if secs else "–" for k in range(len(phases))])
              for j, stage in enumerate(PHASE_SECONDS)]
     rows += [("edges invalidated", [plain(p["edges_invalidated"]) for p in phases]),
+             ("ends alone", [plain(p.get("ends_alone", "–")) for p in phases]),  # query ends no graph edge joined
              ("RRT calls", [plain(p["rrt_calls"]) for p in phases]),
              ("transit checks", [plain(p.get("transit_checks", "–")) for p in phases]),  # sessions before they were counted: '–'
              ("smoothing checks", [plain(p.get("smoothing_checks", "–")) for p in phases]),
