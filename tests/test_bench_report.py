@@ -199,3 +199,12 @@ def test_phases_split_by_whether_the_graph_joined_their_ends_sum_pair_tests_less
     text = MotionBench([0, 1], {"roadmap": [ours, other], "rrt": [rrt, _timed(1, 2.0, 0.5, 40)]}).render()
     assert "phases with a query end no graph edge joins: 1, their transit pair tests less the arm moved away, ours / " \
            "RRTConnect 70 / 40 (RRTConnect / ours 0.57" in text
+
+
+def test_a_kind_of_phase_none_of_the_runs_has_gets_no_ratio_and_the_json_stays_strict():
+    bench = MotionBench([0], {"roadmap": [_timed(0, 1.0, 0.5, 10)], "rrt": [_timed(0, 2.0, 0.5, 40)]})
+    d = bench.to_dict()
+    assert d["phases_alone"] == 0 and d["pair_test_ratio_alone"] is None and d["pair_test_ratio_joined"] == 4.0
+    json.dumps(d["per_seed"], allow_nan=False)
+    json.dumps({k: v for k, v in d.items() if k.endswith(("_joined", "_alone"))}, allow_nan=False)
+    assert "phases with a query end no graph edge joins: 0\n" in bench.render()

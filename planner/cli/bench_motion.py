@@ -107,7 +107,7 @@ class MotionBench:
             ours, rrt = (sum(r.get("transit_pair_tests", 0) - r.get("transit_pair_tests_away", 0) for r in side)
                          for side in zip(*rows)) if rows else (0, 0)
             out.update({f"phases_{key}": len(rows), f"ours_pair_tests_{key}": ours, f"rrt_pair_tests_{key}": rrt,
-                        f"pair_test_ratio_{key}": _ratio(rrt, ours)})
+                        f"pair_test_ratio_{key}": _ratio(rrt, ours) if ours > 0 else None})  # JSON has no NaN
         return out
 
     def _pairs(self) -> list[tuple[dict, dict]]:
@@ -205,6 +205,9 @@ class MotionBench:
                    f"step {d['ours_seconds_total']:.1f} / {d['rrt_seconds_total']:.1f} s ({d['speedup_total']:.2f}): a median hides "
                    "the seeds where one planner spends most")
         for key, what in (("joined", "whose every query end the graph joined"), ("alone", "with a query end no graph edge joins")):
+            if d[f"pair_test_ratio_{key}"] is None:
+                out.append(f"phases {what}: {d[f'phases_{key}']}")
+                continue
             out.append(f"phases {what}: {d[f'phases_{key}']}, their transit pair tests less the arm moved away, ours / "
                        f"RRTConnect {d[f'ours_pair_tests_{key}']:,} / {d[f'rrt_pair_tests_{key}']:,} (RRTConnect / ours "
                        f"{d[f'pair_test_ratio_{key}']:.2f}; summed, the same double grasp on both sides)")
