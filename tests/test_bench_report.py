@@ -192,13 +192,13 @@ def test_phases_split_by_whether_the_graph_joined_their_ends_sum_pair_tests_less
     ours["phases"][2].update(transit_pair_tests=15, transit_pair_tests_away=5)
     rrt["phases"][2].update(transit_pair_tests=45, transit_pair_tests_away=5)
     other = {**_timed(1, 1.0, 0.5, 10), "double_grasp": 3}
-    d = MotionBench([0, 1], {"roadmap": [ours, other], "rrt": [rrt, _timed(1, 2.0, 0.5, 40)]}).to_dict()
+    bench = MotionBench([0, 1], {"roadmap": [ours, other], "rrt": [rrt, _timed(1, 2.0, 0.5, 40)]})
+    d = bench.to_dict()
     assert (d["phases_joined"], d["ours_pair_tests_joined"], d["rrt_pair_tests_joined"]) == (3, 10 + 10 + 10, 40 + 40 + 40)
     assert (d["phases_alone"], d["ours_pair_tests_alone"], d["rrt_pair_tests_alone"]) == (1, 70, 40)
     assert d["pair_test_ratio_joined"] == 4.0 and abs(d["pair_test_ratio_alone"] - 40 / 70) < 1e-12
-    text = MotionBench([0, 1], {"roadmap": [ours, other], "rrt": [rrt, _timed(1, 2.0, 0.5, 40)]}).render()
     assert "phases with a query end no graph edge joins: 1, their transit pair tests less the arm moved away, ours / " \
-           "RRTConnect 70 / 40 (RRTConnect / ours 0.57" in text
+           "RRTConnect 70 / 40 (RRTConnect / ours 0.57" in bench.render()
 
 
 def test_a_kind_of_phase_none_of_the_runs_has_gets_no_ratio_and_the_json_stays_strict():
