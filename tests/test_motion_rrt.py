@@ -200,14 +200,11 @@ def test_an_end_no_graph_edge_joins_is_reconnected_once_with_the_baselines_budge
     """A start behind a wall that hides every node: the graph cannot help, so the query is RRTConnect's alone, with the
     baseline's budget (`rrt_motions`), once: found around the wall though a reconnection's budget (one motion here)
     could not find it; where the start is boxed in, the query fails after that one search."""
-    from planner.motion.transit import LazyTransit, TransitFailed, TransitParams, TransitStats
+    from planner.motion.transit import LazyTransit, TransitFailed, TransitStats
 
     graph, space, walls, start, goal = _behind_a_wall(closed)
-    params = TransitParams(connections=4, max_connections=8, max_searches=60, max_reconnections=2, reconnect_motions=1,
-                           away_motions=1, rrt_motions=3000, rrt_step=0.1, shortcut_attempts=0, shortcut_min_gain=0.0,
-                           graph_shortcut_length=np.inf, goal_nodes=16)
     stats = TransitStats()
-    transit = LazyTransit(graph, space, walls, walls, walls, params, np.random.default_rng(0), stats)
+    transit = LazyTransit(graph, space, walls, walls, walls, _transit_params(np.inf), np.random.default_rng(0), stats)
     if closed:
         with pytest.raises(TransitFailed, match="1 RRT reconnections"):
             transit.query(start, goal)
@@ -220,19 +217,48 @@ def test_an_end_no_graph_edge_joins_is_reconnected_once_with_the_baselines_budge
         assert np.all(clearance(segment_points(a, b, STEP / 10), walls_of(closed)) > 0.0)
 
 
-def test_ends_the_graph_joins_are_not_counted_alone():
-    """The same nodes, the start in front of the wall and a post before the goal: the straight motion hits the post,
-    an edge joins each end to a node, and the graph goes around it: no RRTConnect call, no end alone."""
-    from planner.motion.transit import LazyTransit, TransitParams, TransitStats
+class _Counting(_Walls):
+    """_Walls recording every motion it checks."""
+
+    def __init__(self, boxes):
+        super().__init__(boxes)
+        self.motions: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def motion_valid(self, a: np.ndarray, b: np.ndarray, ends: bool = True) -> bool:
+        self.motions.append((np.asarray(a, float), np.asarray(b, float)))
+        return super().motion_valid(a, b, ends)
+
+
+@pytest.mark.parametrize("max_join, alone", [(np.inf, 0), (0.2, 0), (0.1, 2)])
+def test_an_end_is_joined_only_to_nodes_within_max_join(max_join, alone):
+    """The same nodes, the start (0.45, 0.5) in front of the wall, 0.15 from the nearest node, and a post before the
+    goal: the straight motion hits the post, an edge joins each end to a node, and the graph goes around it (no
+    RRTConnect call, no end alone); with `max_join` below 0.15 no edge from the start is even checked (both ends count
+    alone and RRTConnect joins them at once). Every join tried is within `max_join`; the path is re-checked apart."""
+    from planner.motion.transit import LazyTransit, TransitStats
 
     graph, space, _, _, goal = _behind_a_wall(False)
-    walls = _Walls(walls_of(False) + [(np.array([0.80, 0.45]), np.array([0.85, 0.55]))])
-    params = TransitParams(connections=4, max_connections=8, max_searches=60, max_reconnections=2, reconnect_motions=1,
-                           away_motions=1, rrt_motions=3000, rrt_step=0.1, shortcut_attempts=0, shortcut_min_gain=0.0,
-                           graph_shortcut_length=np.inf, goal_nodes=16)
+    boxes = walls_of(False) + [(np.array([0.80, 0.45]), np.array([0.85, 0.55]))]
+    walls, start = _Counting(boxes), np.array([0.45, 0.5])
     stats = TransitStats()
-    path = LazyTransit(graph, space, walls, walls, walls, params, np.random.default_rng(0), stats).query(np.array([0.45, 0.5]), goal)
-    assert stats.ends_alone == 0 and stats.rrt_calls == 0 and len(path) > 2
+    path = LazyTransit(graph, space, walls, walls, walls, _transit_params(max_join), np.random.default_rng(0), stats).query(start, goal)
+    nodes = graph.q[: graph.n_roadmap]
+    joins = [(a, b) for a, b in walls.motions[1:]  # after the straight motion from the start to the goal (a node too)
+             if any(np.array_equal(a, end) for end in (start, goal)) and np.any(np.all(nodes == b, axis=1))]
+    assert stats.ends_alone == alone and stats.rrt_calls == (1 if alone else 0)
+    assert all(np.linalg.norm(b - a) <= max_join for a, b in joins) and bool(joins) == (not alone)
+    assert np.array_equal(path[0], start) and np.array_equal(path[-1], goal)
+    for a, b in zip(path[:-1], path[1:]):  # free at ten times the checker's resolution
+        assert np.all(clearance(segment_points(a, b, STEP / 10), boxes) > 0.0)
+
+
+def _transit_params(max_join: float):
+    """The transit parameters of the wall scenes: reconnections with one motion, the baseline's budget 3000."""
+    from planner.motion.transit import TransitParams
+
+    return TransitParams(connections=4, max_connections=8, max_join=max_join, max_searches=60, max_reconnections=2,
+                         reconnect_motions=1, away_motions=1, rrt_motions=3000, rrt_step=0.1, shortcut_attempts=0,
+                         shortcut_min_gain=0.0, graph_shortcut_length=np.inf, goal_nodes=16)
 
 
 def walls_of(closed: bool):

@@ -1,8 +1,8 @@
 """Transit motions (paper V-B): the Super Graph query with lazy revalidation, RRT reconnection, then shortcutting.
 
-The query joins the start and the goal to their nearest valid graph nodes (the first edge of each
-checked: the ends are where a phase differs most from the roadmap; an end no edge joins is reconnected
-to the other at once) and searches the graph disregarding the phase (Dijkstra over edges not known
+The query joins the start and the goal to their nearest valid graph nodes within `max_join` (the first
+edge of each checked: the ends are where a phase differs most from the roadmap; an end no edge joins is
+reconnected to the other at once) and searches the graph disregarding the phase (Dijkstra over edges not known
 invalid). The path found is then validated in the phase from both ends inward,
 each side stopping at its first invalid edge: roadmap nodes and edges only over the pairs the
 offline roadmap did not check ('changed': the object, a hand holding it), edges nobody checked
@@ -36,6 +36,7 @@ class TransitParams:
 
     connections: int
     max_connections: int
+    max_join: float
     max_searches: int
     max_reconnections: int
     reconnect_motions: int
@@ -121,14 +122,14 @@ class LazyTransit:
 
     def _connect(self, node: int) -> int:
         """Join a query end to its nearest valid graph nodes, nearest first: by checked edges until one is valid (an end
-        no edge joins, among `max_connections` nodes, is where a phase differs most from the roadmap: it is reconnected
-        at once), then by `connections` - 1 more edges unchecked, validated if a path takes them (an edge from an end is
-        long: the search takes one of them); how many joined."""
+        no edge joins, among `max_connections` nodes no farther than `max_join`, is where a phase differs most from the
+        roadmap: it is reconnected at once), then by `connections` - 1 more edges unchecked, validated if a path takes
+        them (an edge from an end is long: the search takes one of them); how many joined."""
         g, st = self.graph, self.status
         d = self.space.distance(g.q[: g.n_roadmap], g.q[node])
         joined = 0
         for n in np.argsort(d, kind="stable")[: self.p.max_connections]:
-            if joined >= self.p.connections:
+            if joined >= self.p.connections or d[n] > self.p.max_join:
                 break
             if self._node_valid(int(n)):
                 g.add_edges([(node, int(n))])
