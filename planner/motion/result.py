@@ -33,8 +33,7 @@ class MotionParams:
     rate: float = bounded(30.0, 1.0, 1000.0, "Hz", "the trajectory's sampling rate")
     connections: int = bounded(4, 1, 100, "edges", "transit: edges joining each end to the graph, nearest valid nodes first")
     max_connections: int = bounded(48, 1, 1000, "nodes", "transit: nearest nodes tried for those edges")
-    max_join: float = bounded(2.0, 0.0, 100.0, "rad", "transit: no node farther from an end is tried for them (a longer straight "
-                              "join is checked over every pair and in clutter seldom free: RRTConnect from that end at once)")
+    max_join: float = bounded(2.0, 0.0, 100.0, "rad", "transit: nodes farther from an end are not tried (RRTConnect from it)")
     max_searches: int = bounded(60, 1, 10000, "searches", "transit: graph searches after invalidations before reconnecting")
     max_reconnections: int = bounded(2, 0, 100, "calls", "transit: RRTConnect calls per query (then the next candidate end)")
     phase_reconnections: int = bounded(4, 0, 1000, "calls", "transit: RRTConnect calls per phase (then its queries search the graph only)")
