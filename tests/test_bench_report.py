@@ -90,7 +90,7 @@ def test_on_several_roadmaps_each_run_of_ours_is_paired_with_rrtconnect_on_its_s
     assert (d["ours_seconds_total"], d["rrt_seconds_total"]) == (28.0, 16.0) and abs(d["speedup_total"] - 16 / 28) < 1e-9
     text = bench.render()
     assert "over 2 seeds x 2 roadmaps" in text and "ours per roadmap" in text
-    assert "transit pair tests 440 / 960 (RRTConnect / ours 2.18), step 28.0 / 16.0 s (0.57)" in text
+    assert "ours / RRTConnect: transit pair tests 440 / 960 (RRTConnect / ours 2.18), step 28.0 / 16.0 s (0.57)" in text
     json.dumps(d)
 
 

@@ -200,7 +200,7 @@ class MotionBench:
         if d["speedup_bound"]:
             out.append(f"  the step's speedup at most {d['speedup_bound']:.2f} were ours' transits free (RRTConnect median / "
                        "ours' step less its transits' seconds, median)")
-        out.append(f"summed over the runs (each of ours with RRTConnect's on its seed): transit pair tests "
+        out.append(f"summed over the runs (each of ours with RRTConnect's on its seed), ours / RRTConnect: transit pair tests "
                    f"{d['ours_pair_tests_total']:,} / {d['rrt_pair_tests_total']:,} (RRTConnect / ours {d['pair_test_ratio_total']:.2f}), "
                    f"step {d['ours_seconds_total']:.1f} / {d['rrt_seconds_total']:.1f} s ({d['speedup_total']:.2f}): a median hides "
                    "the seeds where one planner spends most")
